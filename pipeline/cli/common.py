@@ -1,0 +1,36 @@
+"""What every CLI command shares: turning typed errors into a message and an exit code."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import typer
+
+from pipeline.errors import BadInputError, PipelineError
+
+EXIT_OK = 0
+EXIT_FAILED_VERDICT = 1
+EXIT_BAD_INPUT = 2
+
+
+@contextmanager
+def user_errors() -> Iterator[None]:
+    """Run a command body; a `PipelineError` becomes `error: <message>` on stderr and exit code 2.
+
+    No traceback: the message already says what is wrong and what to do.
+    """
+    try:
+        yield
+    except BadInputError as err:
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+    except PipelineError as err:
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+
+
+def progress(message: str) -> None:
+    """One progress line on stderr (stdout stays clean for `--json` output)."""
+    print(message, file=sys.stderr, flush=True)

@@ -1,0 +1,86 @@
+"""Recognise a recording's format from its first bytes (never from its name)."""
+
+from __future__ import annotations
+
+import enum
+from pathlib import Path
+
+from pipeline.io.errors import UnknownFormatError
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+_ROS1_MAGIC = b"#ROSBAG V2.0\n"
+_ZIP_MAGICS = (b"PK\x03\x04", b"PK\x05\x06")
+_GZIP_MAGIC = b"\x1f\x8b"
+_TAR_MAGIC_OFFSET = 257
+HEAD_BYTES = 512
+"""How many leading bytes `detect_format_from_head` needs to tell every format apart."""
+
+
+class RecordingFormat(enum.StrEnum):
+    ROS2_DIRECTORY = "ros2-directory"
+    MCAP = "mcap"
+    SQLITE3 = "sqlite3"
+    ROS1 = "ros1"
+    ZIP = "zip"
+    TAR = "tar"
+    TAR_GZ = "tar.gz"
+
+    @property
+    def is_archive(self) -> bool:
+        return self in (RecordingFormat.ZIP, RecordingFormat.TAR, RecordingFormat.TAR_GZ)
+
+
+def detect_format_from_head(head: bytes) -> RecordingFormat | None:
+    """The format whose magic bytes start `head` (the first `HEAD_BYTES` of a file), else None.
+
+    A `.tar.gz` is recognised as gzip; whether it holds a tar is checked when it is opened.
+    """
+    if head.startswith(_MCAP_MAGIC):
+        return RecordingFormat.MCAP
+    if head.startswith(_SQLITE_MAGIC):
+        return RecordingFormat.SQLITE3
+    if head.startswith(_ROS1_MAGIC):
+        return RecordingFormat.ROS1
+    if head.startswith(_ZIP_MAGICS):
+        return RecordingFormat.ZIP
+    if head.startswith(_GZIP_MAGIC):
+        return RecordingFormat.TAR_GZ
+    if head[_TAR_MAGIC_OFFSET : _TAR_MAGIC_OFFSET + 5] == b"ustar":
+        return RecordingFormat.TAR
+    return None
+
+
+def detect_format(path: Path) -> RecordingFormat:
+    """The format of the file or bag directory at `path`.
+
+    Raises `UnknownFormatError` with what was found and what is accepted.
+    """
+    path = Path(path)
+    if path.is_dir():
+        if any(_file_format(child) in (RecordingFormat.MCAP, RecordingFormat.SQLITE3)
+               for child in sorted(path.iterdir()) if child.is_file()):
+            return RecordingFormat.ROS2_DIRECTORY
+        raise UnknownFormatError(
+            f"{path} is a directory without a ROS 2 bag in it (no .mcap or .db3 storage file); "
+            "pass a bag directory, a .mcap, .db3 or ROS 1 .bag file, or a .zip/.tar(.gz) of a bag directory"
+        )
+    if not path.exists():
+        raise UnknownFormatError(f"{path} does not exist; check the path")
+    found = _file_format(path)
+    if found is None:
+        raise UnknownFormatError(
+            f"{path} is not a recording we can read (its first bytes match no known format); "
+            "accepted: ROS 2 bag directory (MCAP or sqlite3), bare .mcap or .db3, ROS 1 .bag, "
+            "or a .zip/.tar/.tar.gz holding a ROS 2 bag directory"
+        )
+    return found
+
+
+def _file_format(path: Path) -> RecordingFormat | None:
+    try:
+        with path.open("rb") as stream:
+            head = stream.read(HEAD_BYTES)
+    except OSError as err:
+        raise UnknownFormatError(f"cannot read {path}: {err.strerror}; check the path and permissions") from err
+    return detect_format_from_head(head)

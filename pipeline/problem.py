@@ -1,0 +1,92 @@
+"""`CalibrationProblem`: what a recording gives the pipeline, with no trace of the file it came from.
+
+Frames: `odom` is the odometry's fixed frame, `base` the robot body (`base_link`), each LiDAR its own
+frame. Clouds are in their LiDAR's frame; poses are named `T_parent_child` (see `transforms`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.transforms import Matrix4
+
+
+@dataclass(frozen=True)
+class LidarInfo:
+    """One LiDAR of the robot.
+
+    `T_base_lidar` is the *initial* extrinsic (tf_static or config), (4, 4) float64.
+    `points_per_second` is the mean rate over the recording (all scans, not only stops).
+    """
+
+    frame: str
+    topic: str
+    T_base_lidar: Matrix4
+    scan_count: int = 0
+    points_per_second: float = 0.0
+
+
+@dataclass(frozen=True)
+class Stop:
+    """A span where the robot stood still, with each LiDAR's scans accumulated over it.
+
+    `t_start`, `t_end`: seconds (ROS time). `T_odom_base`: the *initial* pose of the base during
+    the stop, from odometry, (4, 4). `clouds[frame]`: (N, 3) float64 points in that LiDAR's frame,
+    from every scan wholly inside the stop. `scan_counts[frame]`: how many scans went in.
+    """
+
+    index: int
+    t_start: float
+    t_end: float
+    T_odom_base: Matrix4
+    clouds: Mapping[str, NDArray[np.float64]]
+    scan_counts: Mapping[str, int] = field(default_factory=dict)
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start
+
+
+@dataclass(frozen=True)
+class RecordingInfo:
+    """Where a problem came from, for reports and `fleetcal inspect`."""
+
+    path: str
+    format: str
+    t_start: float
+    t_end: float
+    message_count: int = 0
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def duration(self) -> float:
+        return self.t_end - self.t_start
+
+
+@dataclass(frozen=True)
+class CalibrationProblem:
+    """Everything the four stages need: LiDARs (sorted by frame), stops, and frame names."""
+
+    lidars: tuple[LidarInfo, ...]
+    stops: tuple[Stop, ...]
+    base_frame: str = "base_link"
+    odom_frame: str = "odom"
+    recording: RecordingInfo | None = None
+
+    @property
+    def frames(self) -> tuple[str, ...]:
+        return tuple(lidar.frame for lidar in self.lidars)
+
+    def lidar(self, frame: str) -> LidarInfo:
+        for lidar in self.lidars:
+            if lidar.frame == frame:
+                return lidar
+        raise KeyError(f"no LiDAR with frame {frame!r}; the recording has {list(self.frames)}")
+
+    def kept_points(self) -> int:
+        """Total number of points held in the stop clouds."""
+        return sum(len(cloud) for stop in self.stops for cloud in stop.clouds.values())

@@ -1,0 +1,32 @@
+"""The `fleetcal` command line.
+
+The root lives in `workers` because it is the one package allowed to depend on both `pipeline`
+and `service` (DESIGN.md's dependency direction); each package registers its own commands.
+"""
+
+from __future__ import annotations
+
+import typer
+
+from pipeline import cli as pipeline_cli
+
+app = typer.Typer(
+    name="fleetcal",
+    help="Extrinsic calibration of multiple LiDARs on ground robots, for whole fleets.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+pipeline_cli.register(app)
+
+
+@app.command()
+def version() -> None:
+    """Print the pipeline version."""
+    from pipeline import __version__
+
+    typer.echo(__version__)
+
+
+def main() -> None:
+    app()
