@@ -15,3 +15,27 @@ class UnknownFormatError(RecordingError):
 
 class CorruptRecordingError(RecordingError):
     """The file looks like a recording but cannot be decoded (truncated, damaged, unsafe archive)."""
+
+
+class NoPointCloudError(RecordingError):
+    """The recording has no `sensor_msgs/PointCloud2` topic (or none of the configured ones)."""
+
+
+class TooFewLidarsError(RecordingError):
+    """Fewer than two LiDARs: there is nothing to calibrate against the reference."""
+
+
+class NoTrajectoryError(RecordingError):
+    """Neither the odometry topic nor `/tf` gives the `odom -> base` trajectory."""
+
+
+class MissingExtrinsicsError(RecordingError):
+    """A LiDAR has no initial `T_base_lidar`: no `/tf_static` chain and none in the config."""
+
+
+class NoStopsError(RecordingError):
+    """The trajectory never stands still long enough to accumulate a stop cloud."""
+
+
+class EmptyStopCloudError(RecordingError):
+    """A LiDAR has no valid point in one of the stops."""

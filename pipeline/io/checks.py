@@ -1,0 +1,88 @@
+"""Judge a `RecordingSummary`: the checks that make a recording unusable, and the warnings."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.io.config import WarningThresholds
+from pipeline.io.errors import EmptyStopCloudError, MissingExtrinsicsError
+from pipeline.io.summary import RecordingSummary
+
+
+def require_extrinsics(summary: RecordingSummary) -> None:
+    """Raise `MissingExtrinsicsError` naming every LiDAR without an initial `T_base_lidar`."""
+    missing = [lidar for lidar in summary.lidars if lidar.T_base_lidar is None]
+    if not missing:
+        return
+    names = ", ".join(f"{lidar.frame} ({lidar.topic})" for lidar in missing)
+    example = missing[0].frame
+    raise MissingExtrinsicsError(
+        f"{summary.path}: no initial extrinsics for {names}: /tf_static has no chain "
+        f"{summary.base_frame} -> ... -> LiDAR frame. Record /tf_static (robot_state_publisher or "
+        f"static_transform_publisher), or give them in the config, e.g. extrinsics: "
+        f"{{{example}: {{translation: [x, y, z], rotation_xyzw: [x, y, z, w]}}}}"
+    )
+
+
+def require_stop_points(summary: RecordingSummary) -> None:
+    """Raise `EmptyStopCloudError` if a LiDAR has no valid point in some stop, saying why."""
+    for stop in summary.stops:
+        for lidar in summary.lidars:
+            cloud = stop.clouds.get(lidar.frame)
+            if cloud is not None and cloud.valid_points > 0:
+                continue
+            if cloud is None or cloud.scans == 0:
+                touching = 0 if cloud is None else cloud.scans_touching
+                why = (
+                    f"none of its scans lies wholly inside the stop ({touching} stamped in it, "
+                    f"scan period {lidar.period_s:.3f} s, stop {stop.t_end - stop.t_start:.2f} s); "
+                    "make the stops longer or check the LiDAR's stamps"
+                )
+            else:
+                why = (
+                    f"its {cloud.scans} scans there hold only NaN, infinite or zero points; "
+                    "check that the LiDAR works and is not blocked"
+                )
+            raise EmptyStopCloudError(
+                f"{summary.path}: LiDAR {lidar.frame} ({lidar.topic}) has no valid point in stop "
+                f"{stop.index} ({stop.t_start:.2f}-{stop.t_end:.2f} s): {why}"
+            )
+
+
+def recording_warnings(summary: RecordingSummary, thresholds: WarningThresholds) -> tuple[str, ...]:
+    """What a user should fix or know before uploading; none of it stops the reader."""
+    warnings = list(summary.notes)
+    for lidar in summary.lidars:
+        if lidar.T_base_lidar is None:
+            warnings.append(
+                f"missing tf: no /tf_static chain {summary.base_frame} -> {lidar.frame}; the "
+                "calibration refuses this recording unless its config gives that LiDAR's extrinsics"
+            )
+    if len(summary.stops) < thresholds.min_stops:
+        warnings.append(
+            f"too few stops: {len(summary.stops)} found, {thresholds.min_stops} or more "
+            "recommended (the reference routine has 16); add stops in different headings"
+        )
+    if summary.stops:
+        per_stop = {
+            lidar.frame: sum(
+                stop.clouds[lidar.frame].valid_points
+                for stop in summary.stops
+                if lidar.frame in stop.clouds
+            )
+            / len(summary.stops)
+            for lidar in summary.lidars
+        }
+        median = float(np.median(list(per_stop.values())))
+        for lidar in summary.lidars:
+            mean = per_stop[lidar.frame]
+            if (
+                mean < thresholds.min_points_per_stop
+                or mean < thresholds.min_relative_points * median
+            ):
+                warnings.append(
+                    f"LiDAR {lidar.frame} ({lidar.topic}) sees almost nothing: {mean:.0f} valid "
+                    f"points per stop (median over LiDARs {median:.0f}); check that it is "
+                    "connected, unobstructed and looking at the floor"
+                )
+    return tuple(warnings)

@@ -1,0 +1,278 @@
+"""Read a calibration recording into a `CalibrationProblem` (DESIGN.md's input contract).
+
+Two passes: the first reads `/tf_static` and the trajectory (small messages) and finds the stops;
+the second streams the PointCloud2 topics once, counts every scan and decodes only the scans
+inside a stop. Memory therefore holds the stop clouds, not the recording.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from rosbags.interfaces import Connection
+
+from pipeline.io.checks import recording_warnings, require_extrinsics, require_stop_points
+from pipeline.io.config import ReaderConfig
+from pipeline.io.errors import (
+    NoPointCloudError,
+    NoStopsError,
+    RecordingError,
+    TooFewLidarsError,
+)
+from pipeline.io.motion import Motion, read_motion
+from pipeline.io.pointcloud import decode_xyz, point_count
+from pipeline.io.source import (
+    OpenRecording,
+    connections_of,
+    open_recording,
+    reading_errors,
+    stamp_ns,
+)
+from pipeline.io.stop_clouds import StopClouds
+from pipeline.io.stops import StopSpan, detect_stops, still_runs
+from pipeline.io.summary import LidarSummary, RecordingSummary, StopSummary
+from pipeline.io.tf_tree import normalize_frame
+from pipeline.io.typestores import POINTCLOUD2
+from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, Stop
+
+# Scans reach the bag after their stamp; a stop is closed once the log time is this far past it.
+_CLOSE_SLACK_NS = 2_000_000_000
+
+
+def read_recording(path: Path | str, config: ReaderConfig | None = None) -> CalibrationProblem:
+    """The `CalibrationProblem` of the recording at `path`.
+
+    Raises a `RecordingError` subclass whose message says what is wrong and what to do: unknown,
+    corrupt or truncated file, no PointCloud2, fewer than two LiDARs, no trajectory, no stops, a
+    LiDAR without extrinsics, or a LiDAR without valid points in a stop.
+    """
+    config = config or ReaderConfig()
+    summary = summarize_recording(path, config, keep_points=True)
+    require_extrinsics(summary)
+    lidars = tuple(
+        LidarInfo(
+            lidar.frame, lidar.topic, lidar.T_base_lidar, lidar.scans, lidar.points_per_second
+        )
+        for lidar in summary.lidars
+        if lidar.T_base_lidar is not None
+    )
+    stops = tuple(
+        Stop(
+            index=stop.index,
+            t_start=stop.t_start,
+            t_end=stop.t_end,
+            T_odom_base=stop.T_odom_base,
+            clouds=MappingProxyType(
+                {f: c.points for f, c in stop.clouds.items() if c.points is not None}
+            ),
+            scan_counts=MappingProxyType({f: c.scans for f, c in stop.clouds.items()}),
+        )
+        for stop in summary.stops
+    )
+    info = RecordingInfo(
+        path=summary.path,
+        format=summary.format,
+        t_start=summary.t_start_ns * 1e-9,
+        t_end=summary.t_end_ns * 1e-9,
+        message_count=summary.message_count,
+        warnings=recording_warnings(summary, config.warnings),
+    )
+    return CalibrationProblem(lidars, stops, summary.base_frame, summary.odom_frame, info)
+
+
+def summarize_recording(
+    path: Path | str, config: ReaderConfig | None = None, *, keep_points: bool = True
+) -> RecordingSummary:
+    """Read the recording once (two passes) without judging extrinsics; `inspect` stops here.
+
+    With `keep_points=False` the stop clouds are counted, not kept. Raises every `RecordingError`
+    of `read_recording` except the one for missing extrinsics.
+    """
+    config = config or ReaderConfig()
+    base_frame = normalize_frame(config.base_frame)
+    with open_recording(
+        Path(path), limits=config.archive, scratch_dir=config.scratch_dir
+    ) as opened:
+        topics = _lidar_topics(opened, config.lidar_topics)
+        motion = read_motion(
+            opened,
+            trajectory=config.trajectory,
+            odometry_topic=config.odometry_topic,
+            odom_frame=normalize_frame(config.odom_frame),
+            base_frame=base_frame,
+        )
+        stops = _stops(opened, motion, config)
+        clouds, lidar_stats = _read_clouds(opened, topics, stops, config, keep_points)
+        reader = opened.reader
+        t_start, t_end, count = reader.start_time, reader.end_time, reader.message_count
+    lidars, notes = _lidars(opened, lidar_stats, clouds, motion, config)
+    summary = RecordingSummary(
+        path=str(path),
+        format=opened.format.value,
+        storage=opened.storage.value,
+        t_start_ns=t_start,
+        t_end_ns=t_end,
+        message_count=count,
+        trajectory_source=motion.trajectory.source,
+        odom_frame=motion.odom_frame,
+        base_frame=base_frame,
+        lidars=lidars,
+        stops=tuple(
+            StopSummary(
+                k,
+                stop.t_start_ns,
+                stop.t_end_ns,
+                stop.T_odom_base,
+                MappingProxyType(clouds.closed[k]),
+            )
+            for k, stop in enumerate(stops)
+        ),
+        notes=(*motion.notes, *notes),
+    )
+    require_stop_points(summary)
+    return summary
+
+
+@dataclass
+class _TopicStats:
+    topic: str
+    frame: str = ""
+    scans: int = 0
+    points: int = 0
+    first_ns: int = 0
+    last_ns: int = 0
+
+    def add(self, frame: str, stamp: int, points: int) -> None:
+        if self.scans and frame != self.frame:
+            raise RecordingError(
+                f"{self.topic} carries scans of two frames ({self.frame!r}, then {frame!r}); "
+                "publish each LiDAR on its own topic with one frame_id"
+            )
+        if not self.scans:
+            self.frame, self.first_ns = frame, stamp
+        self.scans += 1
+        self.points += points
+        self.first_ns, self.last_ns = min(self.first_ns, stamp), max(self.last_ns, stamp)
+
+
+def _lidar_topics(opened: OpenRecording, wanted: tuple[str, ...]) -> dict[str, list[Connection]]:
+    clouds = connections_of(opened, POINTCLOUD2)
+    if wanted:
+        missing = [topic for topic in wanted if topic not in clouds]
+        if missing:
+            raise NoPointCloudError(
+                f"{opened.path} has no PointCloud2 on {missing} (its PointCloud2 topics: "
+                f"{sorted(clouds) or 'none'}); fix lidar_topics in the config"
+            )
+        clouds = {topic: clouds[topic] for topic in wanted}
+    if not clouds:
+        others = sorted({c.topic for c in opened.reader.connections})
+        raise NoPointCloudError(
+            f"{opened.path} has no sensor_msgs/PointCloud2 topic (topics: {others or 'none'}); "
+            "record each LiDAR's point cloud, one PointCloud2 topic per LiDAR"
+        )
+    if len(clouds) < 2:
+        raise TooFewLidarsError(
+            f"{opened.path} has one LiDAR topic ({next(iter(clouds))}); calibration needs two or "
+            "more LiDARs, each on its own PointCloud2 topic"
+        )
+    return dict(clouds)
+
+
+def _stops(opened: OpenRecording, motion: Motion, config: ReaderConfig) -> tuple[StopSpan, ...]:
+    settings = config.stops.model_dump()
+    stops = detect_stops(motion.trajectory, **settings)
+    if stops:
+        return stops
+    settings.pop("min_dwell_s")
+    runs = still_runs(motion.trajectory, **settings)
+    longest = float(runs.durations_s.max()) if len(runs.durations_s) else 0.0
+    raise NoStopsError(
+        f"{opened.path}: no stops found in the trajectory ({motion.trajectory.source}, "
+        f"{len(motion.trajectory)} poses): the robot never stood still (under "
+        f"{config.stops.max_linear_speed} m/s and {config.stops.max_angular_speed_deg} deg/s) for "
+        f"{config.stops.min_dwell_s} s; its longest still span lasted {longest:.2f} s. Record a "
+        "stop-and-go routine, or loosen the stops settings of the reader config"
+    )
+
+
+def _read_clouds(
+    opened: OpenRecording,
+    topics: dict[str, list[Connection]],
+    stops: tuple[StopSpan, ...],
+    config: ReaderConfig,
+    keep_points: bool,
+) -> tuple[StopClouds, dict[str, _TopicStats]]:
+    reader = opened.reader
+    clouds = StopClouds(stops, keep_points=keep_points)
+    stats = {topic: _TopicStats(topic) for topic in topics}
+    frame_topic: dict[str, str] = {}
+    connections = [c for group in topics.values() for c in group]
+    with reading_errors(opened.path, opened.storage):
+        for connection, log_ns, raw in reader.messages(connections=connections):
+            msg: Any = reader.deserialize(raw, connection.msgtype)
+            frame = normalize_frame(msg.header.frame_id)
+            topic = connection.topic
+            if frame_topic.setdefault(frame, topic) != topic:
+                raise RecordingError(
+                    f"{frame_topic[frame]} and {topic} both publish scans in frame {frame!r}; "
+                    "each LiDAR needs its own frame_id"
+                )
+            if not frame:
+                raise RecordingError(
+                    f"scans on {topic} have an empty header.frame_id; name each LiDAR's frame"
+                )
+            stamp = stamp_ns(msg.header) or log_ns
+            stats[topic].add(frame, stamp, point_count(msg))
+            points = None
+            if clouds.stop_index(stamp) is not None:
+                points = decode_xyz(msg, topic, drop_zero_points=config.drop_zero_points)
+            clouds.add_scan(frame, stamp, points)
+            clouds.close_before(log_ns - _CLOSE_SLACK_NS)
+    clouds.close_all()
+    return clouds, stats
+
+
+def _lidars(
+    opened: OpenRecording,
+    stats: dict[str, _TopicStats],
+    clouds: StopClouds,
+    motion: Motion,
+    config: ReaderConfig,
+) -> tuple[tuple[LidarSummary, ...], list[str]]:
+    notes = [f"{topic} has no scans and was ignored" for topic, s in stats.items() if not s.scans]
+    present = sorted((s for s in stats.values() if s.scans), key=lambda s: s.frame)
+    if len(present) < 2:
+        raise TooFewLidarsError(
+            f"{opened.path} has scans from {len(present)} LiDAR(s) "
+            f"({[s.topic for s in present]}); calibration needs two or more"
+        )
+    overrides = {normalize_frame(f): pose.matrix() for f, pose in config.extrinsics.items()}
+    frames = [s.frame for s in present]
+    notes += [
+        f"the config gives extrinsics for {f!r}, which is not a LiDAR here (LiDARs: {frames})"
+        for f in sorted(set(overrides) - set(frames))
+    ]
+    base = normalize_frame(config.base_frame)
+    lidars = []
+    for s in present:
+        T, source = overrides.get(s.frame), "config"
+        if T is None:
+            T, source = motion.tree.lookup(base, s.frame), "tf_static"
+        lidars.append(
+            LidarSummary(
+                frame=s.frame,
+                topic=s.topic,
+                scans=s.scans,
+                points=s.points,
+                duration_s=(s.last_ns - s.first_ns) * 1e-9,
+                period_s=clouds.period_ns(s.frame) * 1e-9,
+                T_base_lidar=None if T is None else np.asarray(T, dtype=np.float64),
+                extrinsic_source=None if T is None else source,
+            )
+        )
+    return tuple(lidars), notes

@@ -1,0 +1,180 @@
+"""Open any supported recording as a rosbags `AnyReader`, whatever its name, and translate errors.
+
+rosbags chooses its back-end by file suffix, but we trust only magic bytes; a file whose name
+does not say what it is gets a correctly named symlink in a scratch folder. Archives are unpacked
+there too (see `archive`).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import apsw
+from rosbags import rosbag1, rosbag2
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.interfaces import Connection
+from rosbags.serde import SerdeError
+from rosbags.typesys import TypesysError
+
+from pipeline.io.archive import extract_archive, find_recording
+from pipeline.io.config import ArchiveLimits
+from pipeline.io.errors import CorruptRecordingError, RecordingError
+from pipeline.io.formats import RecordingFormat, _file_format, detect_format
+from pipeline.io.typestores import ros1_typestore, ros2_typestore
+
+_ROS2_STORAGES = (RecordingFormat.MCAP, RecordingFormat.SQLITE3)
+_SUFFIX = {
+    RecordingFormat.MCAP: ".mcap",
+    RecordingFormat.SQLITE3: ".db3",
+    RecordingFormat.ROS1: ".bag",
+}
+
+# What rosbags and its back-ends raise on a damaged or truncated file.
+READ_ERRORS: tuple[type[BaseException], ...] = (
+    AnyReaderError,
+    rosbag1.ReaderError,
+    rosbag2.ReaderError,
+    SerdeError,
+    TypesysError,
+    apsw.Error,
+    struct.error,
+    EOFError,
+    OSError,
+    RuntimeError,  # lz4 frame errors in ROS 1 chunks
+)
+
+
+@dataclass(frozen=True)
+class OpenRecording:
+    """An open recording: the path given, its format, its storage and the reader."""
+
+    path: Path
+    format: RecordingFormat
+    storage: RecordingFormat
+    reader: AnyReader
+
+
+@contextmanager
+def reading_errors(path: Path, storage: RecordingFormat) -> Iterator[None]:
+    """Turn a back-end error while reading `path` into `CorruptRecordingError` with a remedy."""
+    try:
+        yield
+    except RecordingError:
+        raise
+    except READ_ERRORS as err:
+        remedy = {
+            RecordingFormat.ROS1: "run `rosbag reindex` on it, or copy it again",
+            RecordingFormat.SQLITE3: "copy it again; a damaged sqlite3 bag cannot be repaired here",
+        }.get(storage, "copy it again, or repair it with `ros2 bag reindex` / `mcap recover`")
+        raise CorruptRecordingError(
+            f"{path} looks like a {storage.value} recording but cannot be read ({_cause(err)}); "
+            f"it is truncated or damaged: {remedy}"
+        ) from err
+
+
+@contextmanager
+def open_recording(
+    path: Path, *, limits: ArchiveLimits | None = None, scratch_dir: Path | None = None
+) -> Iterator[OpenRecording]:
+    """Open the recording at `path` (bag directory, bare storage file, ROS 1 bag, or archive)."""
+    path = Path(path)
+    limits = limits or ArchiveLimits()
+    fmt = detect_format(path)
+    with ExitStack() as stack:
+        scratch: list[Path] = []
+
+        def scratch_path() -> Path:
+            if not scratch:
+                scratch.append(
+                    Path(
+                        stack.enter_context(
+                            tempfile.TemporaryDirectory(prefix="fleetcal-", dir=scratch_dir)
+                        )
+                    )
+                )
+            return scratch[0]
+
+        inner, inner_fmt = path, fmt
+        if fmt.is_archive:
+            unpacked = scratch_path() / "unpacked"
+            unpacked.mkdir()
+            extract_archive(
+                path,
+                fmt,
+                unpacked,
+                max_extracted_bytes=limits.max_extracted_bytes,
+                max_members=limits.max_members,
+            )
+            inner = find_recording(unpacked, path)
+            inner_fmt = detect_format(inner)
+        storage = _storage_format(inner, inner_fmt)
+        if inner_fmt is RecordingFormat.ROS2_DIRECTORY and (inner / "metadata.yaml").exists():
+            # The directory reader also knows the compression and the split files' order.
+            paths = [inner]
+        else:
+            files = (
+                _storage_files(inner) if inner_fmt is RecordingFormat.ROS2_DIRECTORY else [inner]
+            )
+            paths = [_named_for_rosbags(f, storage, i, scratch_path) for i, f in enumerate(files)]
+        store = ros1_typestore() if storage is RecordingFormat.ROS1 else ros2_typestore()
+        with reading_errors(path, storage):
+            reader = stack.enter_context(AnyReader(paths, default_typestore=store))
+        yield OpenRecording(path, fmt, storage, reader)
+
+
+def _storage_format(path: Path, fmt: RecordingFormat) -> RecordingFormat:
+    """MCAP, sqlite3 or ROS 1: what the reader will find inside a directory or file."""
+    if fmt is not RecordingFormat.ROS2_DIRECTORY:
+        return fmt
+    kinds = {kind for child in _storage_files(path) if (kind := _file_format(child)) is not None}
+    if len(kinds) > 1:
+        raise CorruptRecordingError(
+            f"{path} mixes MCAP and sqlite3 storage files; a bag directory holds one kind"
+        )
+    return kinds.pop()
+
+
+def _storage_files(directory: Path) -> list[Path]:
+    """The MCAP / sqlite3 files of a bag directory, by name (the order `ros2 bag` splits them)."""
+    return [
+        child
+        for child in sorted(directory.iterdir())
+        if child.is_file() and _file_format(child) in _ROS2_STORAGES
+    ]
+
+
+def _named_for_rosbags(
+    path: Path, storage: RecordingFormat, index: int, scratch: Callable[[], Path]
+) -> Path:
+    suffix = _SUFFIX[storage]
+    if path.suffix == suffix:
+        return path
+    link = scratch() / f"{index:04d}-{path.stem}{suffix}"
+    os.symlink(path.resolve(), link)
+    return link
+
+
+def _cause(err: BaseException) -> str:
+    text = str(err).strip() or type(err).__name__
+    return text if len(text) < 200 else text[:200] + "..."
+
+
+def stamp_ns(header: Any) -> int:
+    """A `std_msgs/Header`'s stamp in integer nanoseconds (0 when the publisher left it unset)."""
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def connections_of(opened: OpenRecording, msgtype: str) -> dict[str, list[Connection]]:
+    """Connections of `msgtype` by topic, topics sorted (a ROS 1 topic may have several)."""
+    grouped: dict[str, list[Connection]] = {}
+    for connection in sorted(opened.reader.connections, key=lambda c: (c.topic, c.id)):
+        if connection.msgtype == msgtype:
+            grouped.setdefault(connection.topic, []).append(connection)
+    return grouped

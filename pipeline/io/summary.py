@@ -1,0 +1,79 @@
+"""What one read of a recording found, before it is judged: the strict reader turns it into a
+`CalibrationProblem`, `fleetcal inspect` into a report with warnings.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from pipeline.io.stop_clouds import StopCloud
+from pipeline.transforms import Matrix4
+
+
+@dataclass(frozen=True)
+class LidarSummary:
+    """A LiDAR topic: its frame, scan and point counts (all scans), and initial extrinsic if any.
+
+    `points` counts every point published (`width * height`, valid or not); `period_s` is the
+    median spacing of its scan stamps. `extrinsic_source` is `config`, `tf_static` or None.
+    """
+
+    frame: str
+    topic: str
+    scans: int
+    points: int
+    duration_s: float
+    period_s: float
+    T_base_lidar: Matrix4 | None
+    extrinsic_source: str | None
+
+    @property
+    def points_per_second(self) -> float:
+        span = self.duration_s + self.period_s
+        return self.points / span if span > 0 else 0.0
+
+
+@dataclass(frozen=True)
+class StopSummary:
+    """A stop: its span (ns), mean initial `T_odom_base` (4, 4), and each LiDAR's cloud."""
+
+    index: int
+    t_start_ns: int
+    t_end_ns: int
+    T_odom_base: Matrix4
+    clouds: Mapping[str, StopCloud]
+
+    @property
+    def t_start(self) -> float:
+        return self.t_start_ns * 1e-9
+
+    @property
+    def t_end(self) -> float:
+        return self.t_end_ns * 1e-9
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    """Everything read from one recording. LiDARs sorted by frame; stops in time order.
+
+    `format` is what the user gave (e.g. `zip`), `storage` what was inside (`mcap`, `sqlite3`,
+    `ros1`). `notes` are things noticed while reading that the user should hear about.
+    """
+
+    path: str
+    format: str
+    storage: str
+    t_start_ns: int
+    t_end_ns: int
+    message_count: int
+    trajectory_source: str
+    odom_frame: str
+    base_frame: str
+    lidars: tuple[LidarSummary, ...]
+    stops: tuple[StopSummary, ...]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def duration_s(self) -> float:
+        return (self.t_end_ns - self.t_start_ns) * 1e-9
