@@ -11,6 +11,7 @@ import importlib
 import typer
 
 _COMMAND_MODULES: tuple[str, ...] = (
+    "inspect",
 )
 
 

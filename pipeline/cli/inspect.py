@@ -1,0 +1,109 @@
+"""`fleetcal inspect PATH [--json]`: what a user checks in a recording before uploading it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from pipeline.cli.common import user_errors
+
+
+def register(app: typer.Typer) -> None:
+    app.command("inspect")(inspect_command)
+
+
+def inspect_command(
+    path: Annotated[
+        Path,
+        typer.Argument(help="bag directory, .mcap, .db3, ROS 1 .bag, or .zip/.tar(.gz) of a bag"),
+    ],
+    as_json: Annotated[bool, typer.Option("--json", help="print one JSON document")] = False,
+    config_path: Annotated[
+        Path | None,
+        typer.Option("--config", help="YAML reader config (topics, frames, extrinsics, stops)"),
+    ] = None,
+    odometry_topic: Annotated[
+        str | None, typer.Option(help="nav_msgs/Odometry topic [default: /odom]")
+    ] = None,
+    base_frame: Annotated[
+        str | None, typer.Option(help="robot body frame [default: base_link]")
+    ] = None,
+) -> None:
+    """Format, duration, LiDARs and point rates, stops, initial extrinsics, and warnings."""
+    from pipeline.io.inspection import inspect_recording
+
+    with user_errors():
+        config = _config(config_path, odometry_topic=odometry_topic, base_frame=base_frame)
+        document = inspect_recording(path, config)
+    if as_json:
+        typer.echo(json.dumps(document, indent=2))
+    else:
+        typer.echo(render(document))
+
+
+def _config(path: Path | None, **overrides: str | None) -> Any:
+    """The reader config from `--config` (top level, or its `reader` section) and the options."""
+    import yaml
+    from pydantic import ValidationError
+
+    from pipeline.errors import ConfigError
+    from pipeline.io.config import ReaderConfig
+
+    data: dict[str, Any] = {}
+    if path is not None:
+        try:
+            loaded = yaml.safe_load(path.read_text()) or {}
+        except (OSError, yaml.YAMLError) as err:
+            raise ConfigError(f"cannot read the config {path}: {err}; pass a YAML file") from None
+        if not isinstance(loaded, dict):
+            raise ConfigError(f"{path} must hold a mapping of reader settings")
+        data = dict(loaded.get("reader", loaded))
+    data.update({key: value for key, value in overrides.items() if value is not None})
+    try:
+        return ReaderConfig.model_validate(data)
+    except ValidationError as err:
+        problems = "; ".join(
+            f"{'.'.join(map(str, e['loc'])) or 'config'}: {e['msg']}" for e in err.errors()
+        )
+        raise ConfigError(f"invalid reader config: {problems}") from None
+
+
+def render(document: dict[str, Any]) -> str:
+    """The inspection document as an aligned text report."""
+    lines = [
+        f"recording   {document['path']}",
+        f"format      {document['format']} ({document['storage']} storage)",
+        f"duration    {document['duration']:.1f} s, {document['messages']} messages",
+        f"trajectory  {document['trajectory']} ({document['odom_frame']} -> "
+        f"{document['base_frame']})",
+        f"LiDARs      {len(document['lidars'])}",
+    ]
+    width = max(len(lidar["frame"]) for lidar in document["lidars"])
+    for lidar in document["lidars"]:
+        initial = lidar["initial"]
+        pose = (
+            "no initial extrinsics"
+            if initial is None
+            else "T_base_lidar t=[{}] m q=[{}] ({})".format(
+                ", ".join(f"{v:.3f}" for v in initial["translation"]),
+                ", ".join(f"{v:.3f}" for v in initial["rotation_xyzw"]),
+                lidar["initial_source"],
+            )
+        )
+        lines.append(
+            f"  {lidar['frame']:<{width}}  {lidar['topic']}  {lidar['scans']} scans, "
+            f"{lidar['points_per_second'] / 1000:.1f} k points/s; {pose}"
+        )
+    stops = document["stops"]
+    mean = sum(stop["duration"] for stop in stops) / len(stops)
+    lines.append(f"stops       {len(stops)} (mean {mean:.1f} s)")
+    lines += [
+        f"  {k:>3}  {stop['start']:.2f} - {stop['end']:.2f} s  ({stop['duration']:.1f} s)"
+        for k, stop in enumerate(stops)
+    ]
+    lines.append(f"warnings    {len(document['warnings']) or 'none'}")
+    lines += [f"  - {warning}" for warning in document["warnings"]]
+    return "\n".join(lines)
