@@ -9,6 +9,7 @@ from __future__ import annotations
 import typer
 
 from pipeline import cli as pipeline_cli
+from service import cli as service_cli
 
 app = typer.Typer(
     name="fleetcal",
@@ -18,6 +19,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 pipeline_cli.register(app)
+service_cli.register(app)
 
 
 @app.command()

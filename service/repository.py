@@ -1,0 +1,418 @@
+"""The data layer: every query and write the API and the workers make, on a caller's `Session`.
+
+Functions never commit: the caller owns the transaction (`Database.transaction()`), so an upload's
+robot, run and queue entry, or a result with its extrinsics and final status, land together.
+"""
+
+from __future__ import annotations
+
+import json
+import uuid
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import Any
+
+from pydantic import ValidationError
+from sqlalchemy import func, select, tuple_, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from service.models import (
+    LidarExtrinsic,
+    Result,
+    Robot,
+    Run,
+    RunKind,
+    RunStatus,
+    ToleranceProfile,
+)
+from service.schemas import ResultDocument
+
+
+class RepositoryError(Exception):
+    """Base of the data layer's errors."""
+
+
+class UnknownRobotError(RepositoryError):
+    pass
+
+
+class UnknownRunError(RepositoryError):
+    pass
+
+
+class LeaseLostError(RepositoryError):
+    """The run is no longer held by this worker (its lease expired and another took it over)."""
+
+
+class RunFinishedError(RepositoryError):
+    """The run already has its final status; a retry must not write a second result."""
+
+
+class InvalidResultError(RepositoryError, ValueError):
+    """The result document does not follow the `result.json` contract."""
+
+
+# -- robots -------------------------------------------------------------------------------------
+
+
+def get_robot(session: Session, robot_id: str) -> Robot | None:
+    return session.get(Robot, robot_id)
+
+
+def put_robot(
+    session: Session, robot_id: str, *, model: str | None, metadata: dict[str, Any]
+) -> tuple[Robot, bool]:
+    """Create or replace a robot's model and metadata; returns (robot, created)."""
+    robot = session.get(Robot, robot_id)
+    created = robot is None
+    if robot is None:
+        robot = Robot(id=robot_id, model=model, meta=metadata)
+        session.add(robot)
+    else:
+        robot.model, robot.meta = model, metadata
+    session.flush()
+    return robot, created
+
+
+def list_robots(session: Session, *, limit: int, after_id: str | None) -> list[Robot]:
+    stmt = select(Robot).order_by(Robot.id).limit(limit)
+    if after_id is not None:
+        stmt = stmt.where(Robot.id > after_id)
+    return list(session.scalars(stmt))
+
+
+# -- runs ---------------------------------------------------------------------------------------
+
+
+def find_run_by_idempotency_key(session: Session, robot_id: str, key: str) -> Run | None:
+    return session.scalar(select(Run).where(Run.robot_id == robot_id, Run.idempotency_key == key))
+
+
+@dataclass(frozen=True)
+class NewUpload:
+    """What the upload endpoint knows once the recording is safely in storage."""
+
+    run_id: uuid.UUID
+    robot_id: str
+    kind: RunKind
+    size: int
+    sha256: str
+    format: str
+    storage_key: str
+    idempotency_key: str | None
+    config: dict[str, Any] | None
+    max_attempts: int
+
+
+def record_upload(session: Session, upload: NewUpload, *, create_robot: bool) -> Run:
+    """Insert the run (status `queued`: this is the enqueue), creating the robot if allowed.
+
+    Raises `UnknownRobotError`, or `IntegrityError` when the idempotency key was taken meanwhile.
+    """
+    if session.get(Robot, upload.robot_id) is None:
+        if not create_robot:
+            raise UnknownRobotError(upload.robot_id)
+        session.add(Robot(id=upload.robot_id, meta={}))
+        session.flush()
+    now = datetime.now(UTC)
+    run = Run(
+        id=upload.run_id,
+        robot_id=upload.robot_id,
+        kind=upload.kind,
+        status=RunStatus.QUEUED,
+        upload_size=upload.size,
+        upload_sha256=upload.sha256,
+        upload_format=upload.format,
+        storage_key=upload.storage_key,
+        idempotency_key=upload.idempotency_key,
+        config=upload.config,
+        attempts=0,
+        max_attempts=upload.max_attempts,
+        available_at=now,
+        created_at=now,
+        updated_at=now,
+    )
+    session.add(run)
+    session.flush()
+    return run
+
+
+def get_run(session: Session, run_id: uuid.UUID) -> tuple[Run, Result | None] | None:
+    row = session.execute(
+        select(Run, Result).outerjoin(Result, Result.run_id == Run.id).where(Run.id == run_id)
+    ).first()
+    return None if row is None else (row[0], row[1])
+
+
+@dataclass(frozen=True)
+class RunFilter:
+    robot_id: str | None = None
+    status: RunStatus | None = None
+    kind: RunKind | None = None
+    passed: bool | None = None
+    since: datetime | None = None
+    until: datetime | None = None
+
+
+@dataclass(frozen=True)
+class RunRow:
+    run: Run
+    passed: bool | None
+    metric_error_final: float | None
+
+
+def list_runs(
+    session: Session, where: RunFilter, *, limit: int, after: tuple[datetime, uuid.UUID] | None
+) -> list[RunRow]:
+    """Runs newest first, keyset-paged on (created_at, id): `after` is the last row seen."""
+    stmt = (
+        select(Run, Result.passed, Result.metric_error_final)
+        .outerjoin(Result, Result.run_id == Run.id)
+        .order_by(Run.created_at.desc(), Run.id.desc())
+        .limit(limit)
+    )
+    if where.robot_id is not None:
+        stmt = stmt.where(Run.robot_id == where.robot_id)
+    if where.status is not None:
+        stmt = stmt.where(Run.status == where.status)
+    if where.kind is not None:
+        stmt = stmt.where(Run.kind == where.kind)
+    if where.passed is not None:
+        stmt = stmt.where(Result.passed.is_(where.passed))
+    if where.since is not None:
+        stmt = stmt.where(Run.created_at >= where.since)
+    if where.until is not None:
+        stmt = stmt.where(Run.created_at < where.until)
+    if after is not None:
+        stmt = stmt.where(tuple_(Run.created_at, Run.id) < tuple_(*after))
+    return [RunRow(run, passed, final) for run, passed, final in session.execute(stmt)]
+
+
+def latest_run(session: Session, robot_id: str) -> RunRow | None:
+    rows = list_runs(session, RunFilter(robot_id=robot_id), limit=1, after=None)
+    return rows[0] if rows else None
+
+
+# -- results ------------------------------------------------------------------------------------
+
+
+def store_result(
+    session: Session, run_id: uuid.UUID, document: dict[str, Any], *, lease_owner: str | None = None
+) -> Result:
+    """Write a run's result, its per-LiDAR extrinsics rows, and its final status `succeeded`.
+
+    `succeeded` means the calibration ran to the end; whether it passed is the verdict in the
+    result. With `lease_owner`, the run must still be `running` under that owner
+    (`LeaseLostError` otherwise). A run already finished raises `RunFinishedError`, so a retried
+    worker never writes a second result. LiDARs without a `calibrated` pose (undetermined by the
+    data) keep their entry in the document but get no extrinsics row.
+    """
+    try:
+        json.dumps(document, allow_nan=False)
+        parsed = ResultDocument.model_validate(document)
+    except (ValueError, TypeError, ValidationError) as err:
+        raise InvalidResultError(f"result document does not follow result.json: {err}") from err
+    run = _lock_run(session, run_id, lease_owner)
+    now = datetime.now(UTC)
+    passed = parsed.verdict.passed
+    result = Result(
+        run_id=run.id,
+        robot_id=run.robot_id,
+        document=document,
+        passed=passed,
+        metric_error_initial=parsed.metric_error.initial,
+        metric_error_final=parsed.metric_error.final,
+        pipeline_version=parsed.pipeline_version,
+        config_hash=parsed.config_hash,
+        measured_at=run.created_at,
+        created_at=now,
+    )
+    session.add(result)
+    for frame, lidar in sorted(parsed.lidars.items()):
+        if lidar.calibrated is None:
+            continue
+        (tx, ty, tz), (qx, qy, qz, qw) = (
+            lidar.calibrated.translation,
+            lidar.calibrated.rotation_xyzw,
+        )
+        session.add(
+            LidarExtrinsic(
+                run_id=run.id,
+                robot_id=run.robot_id,
+                frame=frame,
+                measured_at=run.created_at,
+                passed=passed,
+                is_reference=frame == parsed.reference_frame,
+                tx=tx,
+                ty=ty,
+                tz=tz,
+                qx=qx,
+                qy=qy,
+                qz=qz,
+                qw=qw,
+                stddev=lidar.stddev,
+            )
+        )
+    _finish(run, RunStatus.SUCCEEDED, now, error=None)
+    try:
+        session.flush()
+    except IntegrityError as err:
+        raise RunFinishedError(f"run {run_id} already has a result") from err
+    return result
+
+
+def fail_run(
+    session: Session, run_id: uuid.UUID, problem: dict[str, Any], *, lease_owner: str | None = None
+) -> Run:
+    """Mark the run `failed` with `problem`, an RFC 9457 document (`problems.problem_document`)."""
+    run = _lock_run(session, run_id, lease_owner)
+    _finish(run, RunStatus.FAILED, datetime.now(UTC), error=problem)
+    session.flush()
+    return run
+
+
+def _lock_run(session: Session, run_id: uuid.UUID, lease_owner: str | None) -> Run:
+    run = session.get(Run, run_id, with_for_update=True, populate_existing=True)
+    if run is None:
+        raise UnknownRunError(f"no run {run_id}")
+    if run.status in (RunStatus.SUCCEEDED, RunStatus.FAILED):
+        raise RunFinishedError(f"run {run_id} is already {run.status.value}")
+    if lease_owner is not None and (
+        run.status != RunStatus.RUNNING or run.lease_owner != lease_owner
+    ):
+        raise LeaseLostError(f"run {run_id} is not held by {lease_owner} any more")
+    return run
+
+
+def _finish(run: Run, status: RunStatus, now: datetime, *, error: dict[str, Any] | None) -> None:
+    run.status = status
+    run.finished_at = now
+    run.error = error
+    run.lease_owner = None
+    run.lease_expires_at = None
+    if status == RunStatus.SUCCEEDED:
+        run.progress = 1.0
+
+
+def latest_calibration(session: Session, robot_id: str) -> Result | None:
+    """The newest passed result of the robot (by upload time)."""
+    return session.scalar(
+        select(Result)
+        .where(Result.robot_id == robot_id, Result.passed.is_(True))
+        .order_by(Result.measured_at.desc(), Result.run_id.desc())
+        .limit(1)
+    )
+
+
+def extrinsics_of(session: Session, run_id: uuid.UUID) -> list[LidarExtrinsic]:
+    return list(
+        session.scalars(
+            select(LidarExtrinsic)
+            .where(LidarExtrinsic.run_id == run_id)
+            .order_by(LidarExtrinsic.frame)
+        )
+    )
+
+
+def history(
+    session: Session,
+    robot_id: str,
+    *,
+    frame: str | None,
+    passed: bool | None,
+    since: datetime | None,
+    until: datetime | None,
+    limit: int,
+    after: tuple[datetime, int] | None,
+) -> list[LidarExtrinsic]:
+    """Per-LiDAR extrinsics oldest first, keyset-paged on (measured_at, id)."""
+    stmt = (
+        select(LidarExtrinsic)
+        .where(LidarExtrinsic.robot_id == robot_id)
+        .order_by(LidarExtrinsic.measured_at, LidarExtrinsic.id)
+        .limit(limit)
+    )
+    if frame is not None:
+        stmt = stmt.where(LidarExtrinsic.frame == frame)
+    if passed is not None:
+        stmt = stmt.where(LidarExtrinsic.passed.is_(passed))
+    if since is not None:
+        stmt = stmt.where(LidarExtrinsic.measured_at >= since)
+    if until is not None:
+        stmt = stmt.where(LidarExtrinsic.measured_at < until)
+    if after is not None:
+        stmt = stmt.where(tuple_(LidarExtrinsic.measured_at, LidarExtrinsic.id) > tuple_(*after))
+    return list(session.scalars(stmt))
+
+
+# -- tolerance profiles ---------------------------------------------------------------------------
+
+
+def get_tolerance_profile(session: Session, name: str) -> ToleranceProfile | None:
+    return session.get(ToleranceProfile, name)
+
+
+def list_tolerance_profiles(session: Session) -> list[ToleranceProfile]:
+    return list(session.scalars(select(ToleranceProfile).order_by(ToleranceProfile.name)))
+
+
+def put_tolerance_profile(
+    session: Session,
+    name: str,
+    *,
+    robot_model: str | None,
+    is_default: bool,
+    limits: dict[str, Any],
+    design_extrinsics: dict[str, Any] | None,
+) -> tuple[ToleranceProfile, bool]:
+    """Create or replace a profile; returns (profile, created). Making it the default clears
+    the flag elsewhere in the same transaction, so there is at most one default."""
+    if is_default:
+        session.execute(
+            update(ToleranceProfile)
+            .where(ToleranceProfile.is_default.is_(True), ToleranceProfile.name != name)
+            .values(is_default=False, updated_at=datetime.now(UTC))
+        )
+    profile = session.get(ToleranceProfile, name)
+    created = profile is None
+    if profile is None:
+        profile = ToleranceProfile(name=name)
+        session.add(profile)
+    profile.robot_model = robot_model
+    profile.is_default = is_default
+    profile.limits = limits
+    profile.design_extrinsics = design_extrinsics
+    session.flush()
+    return profile, created
+
+
+def tolerance_profile_for_model(session: Session, robot_model: str) -> ToleranceProfile | None:
+    return session.scalar(
+        select(ToleranceProfile).where(ToleranceProfile.robot_model == robot_model)
+    )
+
+
+def tolerance_profile_for(session: Session, robot: Robot) -> ToleranceProfile | None:
+    """The profile for the robot's model, else the default profile, else None."""
+    if robot.model is not None:
+        profile = tolerance_profile_for_model(session, robot.model)
+        if profile is not None:
+            return profile
+    return session.scalar(select(ToleranceProfile).where(ToleranceProfile.is_default.is_(True)))
+
+
+def count_runs_by_status(session: Session) -> dict[RunStatus, int]:
+    counts = dict.fromkeys(RunStatus, 0)
+    for status, count in session.execute(select(Run.status, func.count()).group_by(Run.status)):
+        counts[status] = count
+    return counts
+
+
+def oldest_queued_at(session: Session) -> datetime | None:
+    return session.scalar(
+        select(Run.available_at)
+        .where(Run.status == RunStatus.QUEUED)
+        .order_by(Run.available_at)
+        .limit(1)
+    )

@@ -1,0 +1,188 @@
+"""Robots: the fleet list, one robot, its latest accepted calibration and its extrinsic history."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query, Response
+from pydantic import AwareDatetime
+from sqlalchemy.orm import Session
+
+from service import repository
+from service.auth import Principal
+from service.deps import AdminKey, CurrentKey, ReadKey, RobotIdPath, SessionDep, WriteSessionDep
+from service.models import Robot
+from service.pagination import (
+    PAGE_SIZE_DEFAULT,
+    PAGE_SIZE_MAX,
+    cursor_datetime,
+    decode_cursor,
+    encode_cursor,
+)
+from service.problems import (
+    PROBLEM_RESPONSES,
+    Forbidden,
+    InvalidCursor,
+    NoCalibration,
+    RobotNotFound,
+)
+from service.routes.runs import run_summary
+from service.schemas import (
+    CalibrationPublic,
+    HistoryPage,
+    HistoryPoint,
+    LidarCalibration,
+    RobotDetail,
+    RobotPage,
+    RobotPublic,
+    RobotUpdate,
+)
+
+router = APIRouter(prefix="/v1/robots", tags=["robots"], responses=PROBLEM_RESPONSES)
+
+HISTORY_LIMIT_DEFAULT = 1000
+HISTORY_LIMIT_MAX = 10_000
+
+
+@router.get("", summary="Robots, by id, cursor-paginated")
+def list_robots(
+    _: ReadKey,
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=PAGE_SIZE_MAX)] = PAGE_SIZE_DEFAULT,
+    cursor: Annotated[str | None, Query(max_length=512)] = None,
+) -> RobotPage:
+    after = decode_cursor(cursor, "robots", 1)[0] if cursor is not None else None
+    robots = repository.list_robots(session, limit=limit + 1, after_id=after)
+    next_cursor = encode_cursor("robots", robots[limit - 1].id) if len(robots) > limit else None
+    return RobotPage(items=[robot_public(r) for r in robots[:limit]], next_cursor=next_cursor)
+
+
+@router.get("/{robot_id}", summary="A robot, its tolerance profile and latest run")
+def get_robot(robot_id: RobotIdPath, principal: CurrentKey, session: SessionDep) -> RobotDetail:
+    robot = _readable_robot(session, principal, robot_id)
+    profile = repository.tolerance_profile_for(session, robot)
+    latest = repository.latest_run(session, robot_id)
+    return RobotDetail(
+        **robot_public(robot).model_dump(),
+        tolerance_profile=profile.name if profile else None,
+        latest_run=run_summary(latest.run, latest.passed, latest.metric_error_final)
+        if latest
+        else None,
+    )
+
+
+@router.put(
+    "/{robot_id}",
+    summary="Register a robot or set its model and metadata (admin)",
+    responses={201: {"description": "Created."}},
+)
+def put_robot(
+    robot_id: RobotIdPath,
+    body: RobotUpdate,
+    _: AdminKey,
+    session: WriteSessionDep,
+    response: Response,
+) -> RobotPublic:
+    robot, created = repository.put_robot(
+        session, robot_id, model=body.model, metadata=body.metadata
+    )
+    session.commit()
+    response.status_code = 201 if created else 200
+    return robot_public(robot)
+
+
+@router.get("/{robot_id}/calibration", summary="The robot's latest accepted calibration")
+def get_calibration(
+    robot_id: RobotIdPath, principal: CurrentKey, session: SessionDep
+) -> CalibrationPublic:
+    _readable_robot(session, principal, robot_id)
+    result = repository.latest_calibration(session, robot_id)
+    if result is None:
+        raise NoCalibration(f"robot {robot_id!r} has no passed calibration yet")
+    lidars = {
+        row.frame: LidarCalibration(
+            translation=(row.tx, row.ty, row.tz),
+            rotation_xyzw=(row.qx, row.qy, row.qz, row.qw),
+            is_reference=row.is_reference,
+            stddev=row.stddev,
+        )
+        for row in repository.extrinsics_of(session, result.run_id)
+    }
+    return CalibrationPublic(
+        robot_id=robot_id,
+        run_id=result.run_id,
+        measured_at=result.measured_at,
+        metric_error_initial=result.metric_error_initial,
+        metric_error_final=result.metric_error_final,
+        pipeline_version=result.pipeline_version,
+        lidars=lidars,
+        result=result.document,
+    )
+
+
+@router.get("/{robot_id}/history", summary="Per-LiDAR extrinsics over time, oldest first")
+def get_history(
+    robot_id: RobotIdPath,
+    principal: CurrentKey,
+    session: SessionDep,
+    frame: Annotated[str | None, Query(max_length=128, description="One LiDAR frame.")] = None,
+    passed: Annotated[bool | None, Query(description="true: accepted calibrations only.")] = None,
+    since: Annotated[AwareDatetime | None, Query(description="Uploaded at or after.")] = None,
+    until: Annotated[AwareDatetime | None, Query(description="Uploaded before.")] = None,
+    limit: Annotated[int, Query(ge=1, le=HISTORY_LIMIT_MAX)] = HISTORY_LIMIT_DEFAULT,
+    cursor: Annotated[str | None, Query(max_length=512)] = None,
+) -> HistoryPage:
+    _readable_robot(session, principal, robot_id)
+    after = None
+    if cursor is not None:
+        measured, row_id = decode_cursor(cursor, "history", 2)
+        if not row_id.isdigit():
+            raise InvalidCursor("the cursor is damaged; start again without a cursor")
+        after = (cursor_datetime(measured), int(row_id))
+    rows = repository.history(
+        session,
+        robot_id,
+        frame=frame,
+        passed=passed,
+        since=since,
+        until=until,
+        limit=limit + 1,
+        after=after,
+    )
+    items = [
+        HistoryPoint(
+            run_id=row.run_id,
+            frame=row.frame,
+            measured_at=row.measured_at,
+            passed=row.passed,
+            is_reference=row.is_reference,
+            translation=(row.tx, row.ty, row.tz),
+            rotation_xyzw=(row.qx, row.qy, row.qz, row.qw),
+            stddev=row.stddev,
+        )
+        for row in rows[:limit]
+    ]
+    next_cursor = None
+    if len(rows) > limit:
+        last = rows[limit - 1]
+        next_cursor = encode_cursor("history", last.measured_at, last.id)
+    return HistoryPage(robot_id=robot_id, items=items, next_cursor=next_cursor)
+
+
+def robot_public(robot: Robot) -> RobotPublic:
+    return RobotPublic(
+        id=robot.id,
+        model=robot.model,
+        metadata=robot.meta,
+        created_at=robot.created_at,
+        updated_at=robot.updated_at,
+    )
+
+
+def _readable_robot(session: Session, principal: Principal, robot_id: str) -> Robot:
+    if not principal.may_read_robot(robot_id):
+        raise Forbidden(f"this key may not read robot {robot_id!r}")
+    robot = repository.get_robot(session, robot_id)
+    if robot is None:
+        raise RobotNotFound(f"no robot {robot_id!r}")
+    return robot

@@ -1,0 +1,249 @@
+"""The API's request and response bodies (separate input and public schemas, as in the
+full-stack-fastapi-template), and the slice of `result.json` the service reads."""
+
+from __future__ import annotations
+
+import uuid
+from datetime import datetime
+from typing import Annotated, Any
+
+from pydantic import BaseModel, ConfigDict, Field, JsonValue
+
+from service.models import RunKind, RunStatus
+from service.problems import Problem
+
+ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+
+RobotId = Annotated[str, Field(pattern=ROBOT_ID_PATTERN, examples=["R1"])]
+Vector3 = tuple[float, float, float]
+Quaternion = tuple[float, float, float, float]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class Pose(_Strict):
+    """`T_base_lidar`: translation in metres, rotation as a unit quaternion [x, y, z, w]."""
+
+    translation: Vector3
+    rotation_xyzw: Quaternion
+
+
+# -- runs ---------------------------------------------------------------------------------------
+
+
+class UploadInfo(BaseModel):
+    size: int = Field(description="Bytes received.")
+    sha256: str = Field(description="Hex SHA-256 of the recording.")
+    format: str = Field(
+        description="Format recognised from the magic bytes.", examples=["mcap", "ros1", "zip"]
+    )
+
+
+class RunSummary(BaseModel):
+    """A run as listed: status and verdict, without the result document."""
+
+    id: uuid.UUID
+    robot_id: str
+    kind: RunKind
+    status: RunStatus
+    attempts: int
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    passed: bool | None = Field(description="The verdict, once a result exists.")
+    metric_error_final: float | None = Field(description="Metres, once a result exists.")
+
+
+class RunPublic(RunSummary):
+    """A run with its progress and, once finished, its `result` or its `error`."""
+
+    max_attempts: int
+    stage: str | None = Field(description="The pipeline stage running now.")
+    progress: float | None = Field(description="0..1 while running.")
+    upload: UploadInfo
+    idempotency_key: str | None
+    config: dict[str, JsonValue] | None = Field(
+        description="The calibration config sent with the upload (X-Fleetcal-Config), if any."
+    )
+    result: dict[str, JsonValue] | None = Field(description="The run's result.json document.")
+    error: Problem | None = Field(description="Why the run failed (a problem document).")
+
+
+class RunPage(BaseModel):
+    items: list[RunSummary]
+    next_cursor: str | None = Field(
+        description="Pass as `cursor` for the next page; null on the last page."
+    )
+
+
+# -- robots -------------------------------------------------------------------------------------
+
+
+class RobotUpdate(_Strict):
+    """What an admin sets on a robot (PUT replaces both fields)."""
+
+    model: str | None = Field(
+        default=None,
+        pattern=NAME_PATTERN,
+        description="Robot model; selects the tolerance profile.",
+    )
+    metadata: dict[str, JsonValue] = Field(default_factory=dict)
+
+
+class RobotPublic(BaseModel):
+    id: str
+    model: str | None
+    metadata: dict[str, JsonValue]
+    created_at: datetime
+    updated_at: datetime
+
+
+class RobotDetail(RobotPublic):
+    tolerance_profile: str | None = Field(
+        description="The profile its verdicts use: the one for its model, else the default profile."
+    )
+    latest_run: RunSummary | None
+
+
+class RobotPage(BaseModel):
+    items: list[RobotPublic]
+    next_cursor: str | None
+
+
+class LidarCalibration(BaseModel):
+    translation: Vector3
+    rotation_xyzw: Quaternion
+    is_reference: bool
+    stddev: dict[str, JsonValue] | None
+
+
+class CalibrationPublic(BaseModel):
+    """A robot's latest accepted (passed) calibration."""
+
+    robot_id: str
+    run_id: uuid.UUID
+    measured_at: datetime = Field(description="When the recording was uploaded.")
+    metric_error_initial: float | None
+    metric_error_final: float | None
+    pipeline_version: str
+    lidars: dict[str, LidarCalibration] = Field(description="`T_base_lidar` per LiDAR frame.")
+    result: dict[str, JsonValue]
+
+
+class HistoryPoint(BaseModel):
+    run_id: uuid.UUID
+    frame: str
+    measured_at: datetime
+    passed: bool
+    is_reference: bool
+    translation: Vector3
+    rotation_xyzw: Quaternion
+    stddev: dict[str, JsonValue] | None
+
+
+class HistoryPage(BaseModel):
+    """Per-LiDAR extrinsic series, oldest first, for drift plots."""
+
+    robot_id: str
+    items: list[HistoryPoint]
+    next_cursor: str | None
+
+
+# -- tolerance profiles -------------------------------------------------------------------------
+
+
+class ToleranceLimits(_Strict):
+    """Limits a run must meet to pass; an unset limit is not checked."""
+
+    max_metric_error_m: float | None = Field(default=None, gt=0)
+    max_translation_stddev_m: float | None = Field(default=None, gt=0)
+    max_rotation_stddev_deg: float | None = Field(default=None, gt=0)
+    max_translation_drift_m: float | None = Field(
+        default=None,
+        gt=0,
+        description="Maintenance runs: change from the last accepted calibration.",
+    )
+    max_rotation_drift_deg: float | None = Field(default=None, gt=0)
+    max_translation_deviation_m: float | None = Field(
+        default=None, gt=0, description="End-of-line runs: difference from the design extrinsics."
+    )
+    max_rotation_deviation_deg: float | None = Field(default=None, gt=0)
+
+
+class ToleranceProfileIn(_Strict):
+    robot_model: str | None = Field(
+        default=None, pattern=NAME_PATTERN, description="The robot model this profile applies to."
+    )
+    is_default: bool = Field(
+        default=False,
+        description="Used for robots whose model has no "
+        "profile; setting it clears the flag on the previous default.",
+    )
+    limits: ToleranceLimits = Field(default_factory=ToleranceLimits)
+    design_extrinsics: dict[str, Pose] | None = Field(
+        default=None, description="The model's design `T_base_lidar` per LiDAR frame."
+    )
+
+
+class ToleranceProfilePublic(ToleranceProfileIn):
+    model_config = ConfigDict(extra="ignore")
+
+    name: str
+    created_at: datetime
+    updated_at: datetime
+
+
+class ToleranceProfilePage(BaseModel):
+    items: list[ToleranceProfilePublic]
+
+
+# -- health -------------------------------------------------------------------------------------
+
+
+class Health(BaseModel):
+    status: str = "ok"
+
+
+class Readiness(BaseModel):
+    status: str
+    checks: dict[str, str]
+
+
+# -- result.json (what the service reads of it) ---------------------------------------------------
+
+
+class ResultLidar(BaseModel):
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
+
+    calibrated: Pose | None = None
+    stddev: dict[str, Any] | None = None
+
+
+class ResultMetricError(BaseModel):
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
+
+    initial: float | None = None
+    final: float | None = None
+
+
+class ResultVerdict(BaseModel):
+    model_config = ConfigDict(extra="allow")
+
+    passed: bool
+
+
+class ResultDocument(BaseModel):
+    """The fields of DESIGN.md's `result.json` that become columns; the rest is kept as is."""
+
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
+
+    schema_version: int
+    reference_frame: str
+    lidars: dict[str, ResultLidar] = Field(min_length=1)
+    metric_error: ResultMetricError = Field(default_factory=ResultMetricError)
+    verdict: ResultVerdict
+    pipeline_version: str = Field(min_length=1, max_length=64)
+    config_hash: str | None = Field(default=None, max_length=80)

@@ -1,0 +1,97 @@
+"""The service's settings: one `Settings` object read from `FLEETCAL_*` environment variables.
+
+Nothing is read at import; callers build `Settings()` (or `Settings(data_dir=...)` from a CLI
+option) and hand it to `create_app`, `make_engine` and `make_storage`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field, PositiveInt, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+DEFAULT_DATA_DIR = Path(".fleetcal")
+"""Relative to the working directory, so a clone's demo keeps its state next to the code
+(and `.gitignore` lists it); deployments set `FLEETCAL_DATA_DIR` or explicit URLs."""
+
+GIB = 1024**3
+
+
+class Settings(BaseSettings):
+    """Service configuration. Every field can be set as `FLEETCAL_<FIELD>` in the environment.
+
+    With nothing set, the service keeps a SQLite database (`fleetcal.db`) and a local object store
+    (`storage/`) under `data_dir`, created on first use.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="FLEETCAL_", extra="ignore", frozen=True)
+
+    data_dir: Path = Field(
+        default=DEFAULT_DATA_DIR,
+        description="Directory of the embedded database and local storage (created on first use).",
+    )
+    database_url: str | None = Field(
+        default=None,
+        description="SQLAlchemy URL, e.g. postgresql+psycopg://user@host/db; "
+        "default sqlite:///<data_dir>/fleetcal.db.",
+    )
+    storage_url: str | None = Field(
+        default=None,
+        description="file:///abs/dir or s3://bucket[/prefix]; default file://<data_dir>/storage.",
+    )
+    s3_endpoint_url: str | None = Field(
+        default=None,
+        description="Endpoint of an S3-compatible store (MinIO, Ceph, ...); unset for AWS. "
+        "Credentials come from the usual AWS_* variables or profiles.",
+    )
+    s3_region: str | None = Field(default=None, description="Region of the S3 bucket.")
+    s3_part_size_bytes: Annotated[int, Field(ge=5 * 1024**2)] = Field(
+        default=16 * 1024**2,
+        description="Multipart part size for S3 uploads (S3's minimum is 5 MiB); "
+        "the memory one upload holds at most.",
+    )
+    max_upload_bytes: PositiveInt = Field(
+        default=8 * GIB,
+        description="Largest recording accepted (413 past it).",
+    )
+    create_robots_on_upload: bool = Field(
+        default=True,
+        description="Register an unknown robot on its first upload (by a key allowed to upload "
+        "for it); when false, uploads for unknown robots get 404.",
+    )
+    migrate_on_start: bool = Field(
+        default=True, description="Apply pending Alembic migrations when the API starts."
+    )
+    run_max_attempts: PositiveInt = Field(
+        default=3, description="Attempts a run gets before the queue marks it failed."
+    )
+    run_lease_seconds: PositiveInt = Field(
+        default=60, description="How long a worker's claim on a run lasts without a heartbeat."
+    )
+    sqlite_busy_timeout_ms: PositiveInt = Field(
+        default=30_000, description="How long a SQLite writer waits for the lock before failing."
+    )
+    stale_upload_seconds: PositiveInt = Field(
+        default=6 * 3600,
+        description="Temporary uploads untouched for this long are left-overs of a killed process "
+        "and are removed at start.",
+    )
+
+    @field_validator("database_url", "storage_url", "s3_endpoint_url", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, value: object) -> object:
+        return None if value == "" else value
+
+    @property
+    def resolved_database_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'fleetcal.db').resolve()}"
+
+    @property
+    def resolved_storage_url(self) -> str:
+        if self.storage_url:
+            return self.storage_url
+        return (self.data_dir / "storage").resolve().as_uri()
