@@ -1,0 +1,347 @@
+"""Simulated LiDAR scans with noise labels, and whole calibration problems built in memory.
+
+`scan` casts one LiDAR's rays into a scene. `World` fixes everything a seed decides (objects,
+true and perturbed extrinsics, odometry errors) and simulates any scan of a recording on demand,
+each with its own random stream, so a scan's points do not depend on which other scans were
+simulated: `simulate_problem` (stops only, in memory) and `write_recording` (every scan, to a
+bag) produce the same stop clouds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import ConfigError
+from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, Stop
+from pipeline.synth.lidar_models import LidarModel
+from pipeline.synth.motion import interpolate_drift
+from pipeline.synth.perturbation import random_perturbation
+from pipeline.synth.raycast import cast_with_footprint
+from pipeline.synth.scenarios import ScenarioSpec, get_scenario
+from pipeline.synth.scene import Scene, build_scene, place_objects
+from pipeline.synth.truth import LidarTruth, ScanLabels, StopTruth, Truth
+from pipeline.transforms import Matrix4
+
+PoseFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+"""Times (K,) -> `T_world_lidar` (K, 4, 4): the sensor's pose while it scans."""
+
+_NS = 1_000_000_000
+_MAX_INTENSITY = 255.0
+# Stream ids that keep the random draws of one concern independent of the others.
+_SCENE, _SCAN, _EXTRINSICS, _ODOMETRY = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class LabelledScan:
+    """One scan. `points` (N, 3) float64 in the LiDAR frame *at each point's firing time* (no
+    motion compensation, as drivers publish them); `times` (N,) seconds since the recording
+    started; `intensity` (N,) float32; `is_bleeding` (N,) bool; `object_index` (N,) int16
+    (index into the scene's objects, -1 the floor)."""
+
+    stamp_ns: int
+    points: NDArray[np.float64]
+    times: NDArray[np.float64]
+    intensity: NDArray[np.float32]
+    is_bleeding: NDArray[np.bool_]
+    object_index: NDArray[np.int16]
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def scan(
+    scene: Scene,
+    lidar: LidarModel,
+    T_world_lidar: Matrix4 | PoseFn,
+    t0: float,
+    duration: float,
+    rng: np.random.Generator,
+    *,
+    rate_scale: float = 1.0,
+    slice_s: float = 0.01,
+    stamp_ns: int = 0,
+) -> LabelledScan:
+    """Cast `lidar`'s rays fired in `[t0, t0 + duration)` (seconds since the recording started).
+
+    `T_world_lidar` is a fixed pose, or a function of time for a moving sensor: then the scan is
+    cast in slices of `slice_s`, each from the pose at its middle. Rays that hit nothing within
+    the model's range give no point. Range noise is Gaussian with the model's sigma; bleeding
+    points come from `raycast.cast_with_footprint`, labelled when they float more than three
+    sigmas away from both surfaces they mix.
+    """
+    firing = lidar.firing(t0, duration, rate_scale)
+    starts: NDArray[np.int64] = np.zeros(1, dtype=np.int64)
+    ends: NDArray[np.int64] = np.full(1, len(firing), dtype=np.int64)
+    if not callable(T_world_lidar):
+        poses = np.asarray(T_world_lidar, dtype=np.float64)[None]
+    elif len(firing):
+        slice_index = np.floor((firing.times - t0) / slice_s).astype(np.int64)
+        bounds = np.flatnonzero(np.diff(slice_index)) + 1
+        starts = np.concatenate([starts, bounds])
+        ends = np.concatenate([bounds, ends])
+        middles = t0 + (slice_index[starts] + 0.5) * slice_s
+        poses = T_world_lidar(middles.astype(np.float64))
+    else:
+        poses = T_world_lidar(np.array([t0]))
+
+    ranges, geoms, cosines, bleeding = [], [], [], []
+    for start, end, pose in zip(starts, ends, poses, strict=True):
+        directions_world = firing.directions[start:end] @ pose[:3, :3].T
+        returns = cast_with_footprint(
+            scene,
+            pose[:3, 3],
+            directions_world,
+            max_range=lidar.max_range_m,
+            footprint_deg=lidar.footprint_deg,
+            label_margin_m=3.0 * lidar.range_noise_m,
+            rng=rng,
+        )
+        ranges.append(returns.range_m)
+        geoms.append(returns.geom)
+        cosines.append(returns.cos_incidence)
+        bleeding.append(returns.is_bleeding)
+    range_m = np.concatenate(ranges) if ranges else np.zeros(0)
+    geom = np.concatenate(geoms) if geoms else np.zeros(0, dtype=np.int32)
+    keep = np.isfinite(range_m) & (range_m >= lidar.min_range_m)
+    measured = range_m[keep] + rng.normal(0.0, lidar.range_noise_m, size=int(keep.sum()))
+    geom = geom[keep]
+    intensity = np.clip(
+        _MAX_INTENSITY * scene.geom_reflectivity[geom] * np.concatenate(cosines)[keep],
+        0.0,
+        _MAX_INTENSITY,
+    )
+    return LabelledScan(
+        stamp_ns=stamp_ns,
+        points=firing.directions[keep] * measured[:, None],
+        times=firing.times[keep],
+        intensity=intensity.astype(np.float32),
+        is_bleeding=np.concatenate(bleeding)[keep] if bleeding else np.zeros(0, dtype=bool),
+        object_index=scene.geom_object[geom].astype(np.int16),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """A scenario made concrete by a seed: the scene, true and perturbed poses, odometry errors.
+
+    Times: `t` in seconds since the first stop began (the recording's start); ROS time is
+    `spec.start_time_ns + t`.
+    """
+
+    spec: ScenarioSpec
+    seed: int
+    rate_scale: float
+    scene: Scene
+    T_base_lidar_true: tuple[Matrix4, ...]
+    T_base_lidar_initial: tuple[Matrix4, ...]
+    odometry_errors: NDArray[np.float64]
+
+    @property
+    def duration_s(self) -> float:
+        return self.spec.motion.duration_s
+
+    def scan_period_ns(self, lidar_index: int) -> int:
+        return round(self.spec.lidars[lidar_index].model.scan_period_s * _NS)
+
+    def scan_count(self, lidar_index: int) -> int:
+        """Scans of this LiDAR in the recording (the last one ends by the last stop's end)."""
+        return int(round(self.duration_s * _NS) // self.scan_period_ns(lidar_index))
+
+    def stop_scans(self, lidar_index: int, stop_index: int) -> range:
+        """Indices of the scans lying wholly inside the stop."""
+        period = self.scan_period_ns(lidar_index)
+        start, end = (round(t * _NS) for t in self.spec.motion.stop_intervals()[stop_index])
+        return range(-(-start // period), end // period)
+
+    def is_still(self, lidar_index: int, scan_index: int) -> bool:
+        period = self.scan_period_ns(lidar_index)
+        start, end = scan_index * period, (scan_index + 1) * period
+        return any(
+            round(a * _NS) <= start and end <= round(b * _NS)
+            for a, b in self.spec.motion.stop_intervals()
+        )
+
+    def T_world_lidar(self, lidar_index: int) -> PoseFn:
+        T_base_lidar = self.T_base_lidar_true[lidar_index]
+        return lambda t: self.spec.motion.poses(t) @ T_base_lidar
+
+    def odometry(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Odometry's `T_odom_base` (K, 4, 4): the true pose times the drifting error."""
+        return self.spec.motion.poses(t) @ interpolate_drift(
+            self.spec.motion, self.odometry_errors, t
+        )
+
+    def simulate_scan(self, lidar_index: int, scan_index: int) -> LabelledScan:
+        """Scan `scan_index` of LiDAR `lidar_index`, the same whichever scans came before."""
+        mount = self.spec.lidars[lidar_index]
+        period = self.scan_period_ns(lidar_index)
+        t0 = scan_index * period / _NS
+        rng = np.random.default_rng([self.seed, _SCAN, lidar_index, scan_index])
+        pose_fn = self.T_world_lidar(lidar_index)
+        pose: Matrix4 | PoseFn = pose_fn
+        if self.is_still(lidar_index, scan_index):
+            pose = pose_fn(np.array([t0]))[0]
+        self.scene.place_robot(self.spec.motion.poses(np.array([t0 + period / (2 * _NS)]))[0])
+        return scan(
+            self.scene,
+            mount.model,
+            pose,
+            t0,
+            period / _NS,
+            rng,
+            rate_scale=self.rate_scale,
+            stamp_ns=self.spec.start_time_ns + scan_index * period,
+        )
+
+    @cached_property
+    def stop_times(self) -> NDArray[np.float64]:
+        """(stops, 2) start and end of each stop, seconds since the recording started."""
+        return self.spec.motion.stop_intervals()
+
+    def truth(self, labels: dict[str, ScanLabels] | None = None) -> Truth:
+        start_s = self.spec.start_time_ns / _NS
+        stop_true = self.spec.motion.poses(self.stop_times[:, 0])
+        stop_initial = self.odometry(self.stop_times[:, 0])
+        return Truth(
+            scenario=self.spec.name,
+            seed=self.seed,
+            rate_scale=self.rate_scale,
+            base_frame=self.spec.base_frame,
+            odom_frame=self.spec.odom_frame,
+            reference_frame=self.spec.reference_frame,
+            lidars=tuple(
+                LidarTruth(
+                    frame=mount.frame,
+                    topic=mount.topic,
+                    model=mount.model.kind,
+                    optical_axis=mount.model.optical_axis,
+                    scan_period_s=self.scan_period_ns(i) / _NS,
+                    T_base_lidar_true=self.T_base_lidar_true[i],
+                    T_base_lidar_initial=self.T_base_lidar_initial[i],
+                )
+                for i, mount in enumerate(self.spec.lidars)
+            ),
+            stops=tuple(
+                StopTruth(
+                    index=j,
+                    t_start=start_s + float(a),
+                    t_end=start_s + float(b),
+                    T_odom_base_true=stop_true[j],
+                    T_odom_base_initial=stop_initial[j],
+                )
+                for j, (a, b) in enumerate(self.stop_times)
+            ),
+            objects=self.scene.objects,
+            labels=labels or {},
+        )
+
+
+def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0) -> World:
+    """Fix everything `seed` decides for `scenario` (a registered name or a spec)."""
+    spec = get_scenario(scenario) if isinstance(scenario, str) else scenario
+    if not (math.isfinite(rate_scale) and rate_scale > 0):
+        raise ConfigError(f"rate_scale must be a positive number, got {rate_scale}")
+    motion = spec.motion
+    objects = place_objects(
+        spec.scene, np.random.default_rng([seed, _SCENE]), (motion.radius_m, motion.radius_m)
+    )
+    true = tuple(mount.T_base_lidar() for mount in spec.lidars)
+    scene = build_scene(
+        spec.scene, objects, {m.frame: T for m, T in zip(spec.lidars, true, strict=True)}
+    )
+    rng = np.random.default_rng([seed, _EXTRINSICS])
+    initial = tuple(T @ random_perturbation(rng, spec.extrinsic_error) for T in true)
+    rng = np.random.default_rng([seed, _ODOMETRY])
+    errors = np.stack([random_perturbation(rng, spec.odometry_error) for _ in range(motion.stops)])
+    return World(
+        spec=spec,
+        seed=seed,
+        rate_scale=spec.rate_scale * rate_scale,
+        scene=scene,
+        T_base_lidar_true=true,
+        T_base_lidar_initial=initial,
+        odometry_errors=errors,
+    )
+
+
+def simulate_problem(
+    scenario: str | ScenarioSpec, seed: int = 0, rate_scale: float = 1.0
+) -> tuple[CalibrationProblem, Truth]:
+    """The `CalibrationProblem` a reader would build from the scenario's recording, and its truth.
+
+    Only the scans wholly inside each stop are simulated (those are all a stop cloud holds), so
+    this is much faster than writing the bag. Stop poses are the odometry's (perturbed), LiDAR
+    extrinsics the perturbed `/tf_static` ones. `truth.stop_labels(j, frame)` lines up with
+    `problem.stops[j].clouds[frame]`.
+    """
+    world = make_world(scenario, seed, rate_scale)
+    spec = world.spec
+    start_s = spec.start_time_ns / _NS
+    odometry = world.odometry(world.stop_times[:, 0])
+    chunks: dict[str, list[LabelledScan]] = {m.frame: [] for m in spec.lidars}
+    stops = []
+    for j, (a, b) in enumerate(world.stop_times):
+        clouds, counts = {}, {}
+        for i, mount in enumerate(spec.lidars):
+            scans = [world.simulate_scan(i, k) for k in world.stop_scans(i, j)]
+            chunks[mount.frame] += scans
+            clouds[mount.frame] = (
+                np.concatenate([s.points for s in scans]) if scans else np.zeros((0, 3))
+            )
+            counts[mount.frame] = len(scans)
+        stops.append(
+            Stop(
+                index=j,
+                t_start=start_s + float(a),
+                t_end=start_s + float(b),
+                T_odom_base=odometry[j],
+                clouds=clouds,
+                scan_counts=counts,
+            )
+        )
+    lidars = sorted(
+        (
+            LidarInfo(
+                frame=mount.frame,
+                topic=mount.topic,
+                T_base_lidar=world.T_base_lidar_initial[i],
+                scan_count=world.scan_count(i),
+                points_per_second=mount.model.rate(world.rate_scale),
+            )
+            for i, mount in enumerate(spec.lidars)
+        ),
+        key=lambda lidar: lidar.frame,
+    )
+    problem = CalibrationProblem(
+        lidars=tuple(lidars),
+        stops=tuple(stops),
+        base_frame=spec.base_frame,
+        odom_frame=spec.odom_frame,
+        recording=RecordingInfo(
+            path=f"synthetic:{spec.name}:{seed}",
+            format="synthetic",
+            t_start=start_s,
+            t_end=start_s + world.duration_s,
+        ),
+    )
+    labels = {frame: labels_of(chunks[frame]) for frame in chunks}
+    return problem, world.truth(labels)
+
+
+def labels_of(scans: list[LabelledScan]) -> ScanLabels:
+    """Concatenate the labels of scans (in message order) into the `labels.npz` layout."""
+    sizes = np.array([len(s) for s in scans], dtype=np.int64)
+    return ScanLabels(
+        stamps_ns=np.array([s.stamp_ns for s in scans], dtype=np.int64),
+        offsets=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+        is_bleeding=np.concatenate([s.is_bleeding for s in scans]) if scans else np.zeros(0, bool),
+        object_index=(
+            np.concatenate([s.object_index for s in scans]) if scans else np.zeros(0, np.int16)
+        ),
+    )
