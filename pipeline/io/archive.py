@@ -96,7 +96,8 @@ def _extract_zip(path: Path, dest: Path, max_bytes: int, max_members: int) -> No
             if info.is_dir():
                 target.mkdir(parents=True, exist_ok=True)
                 continue
-            if mode and not stat.S_ISREG(mode):
+            # Windows tools and Python's writestr leave the type bits empty: only permissions.
+            if stat.S_IFMT(mode) not in (0, stat.S_IFREG, stat.S_IFDIR):
                 raise _special_error(path, info.filename)
             with archive.open(info) as source:
                 _write(source, target)

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.io.writer import RecordingWriter, WriterFormat
 from pipeline.transforms import Matrix4, apply, from_xyz_rpy, invert
@@ -49,6 +50,12 @@ class Spec:
     lidars: Sequence[str] = ("lidar_front", "lidar_rear")
     float64_lidars: Sequence[str] = ("lidar_rear",)
     big_endian_lidars: Sequence[str] = ("lidar_rear",)
+    nan_fraction_of: dict[str, float] = field(default_factory=dict)
+    """Per-LiDAR override of `nan_fraction` (1.0: a dead LiDAR)."""
+    footprint_height: float | None = None
+    """If set, odometry moves `base_footprint`, this far below `base_link` (a tf_static edge)."""
+    frame_prefix: str = ""
+    """Written before every frame id (`/` as ROS 1 tf used to)."""
     seed: int = 7
 
 
@@ -61,8 +68,7 @@ class Truth:
     T_odom_base_odometry: list[Matrix4]
     T_base_lidar: dict[str, Matrix4]
     T_base_lidar_initial: dict[str, Matrix4]
-    valid_per_scan: int
-    extra: dict[str, object] = field(default_factory=dict)
+    valid_per_scan: dict[str, int]
 
 
 def pose_at(spec: Spec, t: float, *, with_error: bool = False) -> Matrix4:
@@ -70,9 +76,13 @@ def pose_at(spec: Spec, t: float, *, with_error: bool = False) -> Matrix4:
     cycle = spec.dwell_s + spec.move_s
     rel = max(t - spec.t0, 0.0)
     k = min(int(rel // cycle), spec.stops - 1)
-    frac = 0.0 if rel - k * cycle <= spec.dwell_s else (rel - k * cycle - spec.dwell_s) / spec.move_s
+    frac = (
+        0.0 if rel - k * cycle <= spec.dwell_s else (rel - k * cycle - spec.dwell_s) / spec.move_s
+    )
     progress = k + min(frac, 1.0) if k < spec.stops - 1 else float(k)
-    T = from_xyz_rpy([spec.step_m * progress, 0.0, 0.0], [0.0, 0.0, np.radians(spec.turn_deg * progress)])
+    T = from_xyz_rpy(
+        [spec.step_m * progress, 0.0, 0.0], [0.0, 0.0, np.radians(spec.turn_deg * progress)]
+    )
     if with_error:
         T[0, 3] += spec.odom_error_m * progress
     return T
@@ -84,37 +94,63 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
     cycle = spec.dwell_s + spec.move_s
     t_end = spec.t0 + (spec.stops - 1) * cycle + spec.dwell_s
     initial = {name: TRUE_EXTRINSICS[name] @ PERTURBATION for name in spec.lidars}
-    n_nan = int(spec.points * spec.nan_fraction)
     n_zero = int(spec.points * spec.zero_fraction)
-    n_valid = spec.points - n_nan - n_zero
+    n_nan = {
+        name: int(spec.points * spec.nan_fraction_of.get(name, spec.nan_fraction))
+        for name in spec.lidars
+    }
+    n_nan = {name: min(n, spec.points - n_zero) for name, n in n_nan.items()}
+    n_valid = {name: spec.points - n_nan[name] - n_zero for name in spec.lidars}
+    f = spec.frame_prefix
+    T_footprint_base = from_xyz_rpy([0.0, 0.0, spec.footprint_height or 0.0], [0.0, 0.0, 0.0])
     with RecordingWriter(path, fmt) as writer:
         if spec.tf_static:
-            edges = [("base_link", "lidar_front", initial["lidar_front"])] if "lidar_front" in initial else []
+            edges = (
+                [(f + "base_link", f + "lidar_front", initial["lidar_front"])]
+                if "lidar_front" in initial
+                else []
+            )
             if "lidar_rear" in initial:
                 # Perturb the chain's last edge so that the composed chain equals `initial`.
                 T_mount_rear = invert(T_BASE_MOUNT) @ initial["lidar_rear"]
-                edges += [("base_link", "rear_mount", T_BASE_MOUNT), ("rear_mount", "lidar_rear", T_mount_rear)]
+                edges += [
+                    (f + "base_link", f + "rear_mount", T_BASE_MOUNT),
+                    (f + "rear_mount", f + "lidar_rear", T_mount_rear),
+                ]
+            if spec.footprint_height is not None:
+                edges.append((f + "base_footprint", f + "base_link", T_footprint_base))
             writer.write_transforms(int(spec.t0 * NS), edges, static=True)
         for t in np.arange(spec.t0, t_end + 1e-9, 1.0 / spec.odom_hz):
-            stamp = int(round(t * NS))
+            stamp = round(float(t) * NS)
             T = pose_at(spec, t, with_error=True)
+            child = "base_link"
+            if spec.footprint_height is not None:
+                T, child = T @ invert(T_footprint_base), "base_footprint"
             if spec.trajectory == "odometry":
-                writer.write_odometry("/odom", stamp, T)
+                writer.write_odometry(
+                    "/odom", stamp, T, odom_frame=f + "odom", base_frame=f + child
+                )
             elif spec.trajectory == "tf":
-                writer.write_transforms(stamp, [("odom", "base_link", T)])
+                writer.write_transforms(stamp, [(f + "odom", f + child, T)])
         for t in np.arange(spec.t0, t_end + 1e-9, 1.0 / spec.scan_hz):
-            stamp = int(round(t * NS))
+            stamp = round(float(t) * NS)
             T_odom_base = pose_at(spec, t)
             for name in spec.lidars:
-                radius = rng.uniform(1.0, 4.0, n_valid)
-                angle = rng.uniform(0, 2 * np.pi, n_valid)
-                floor = np.c_[radius * np.cos(angle), radius * np.sin(angle), np.zeros(n_valid)]
+                radius = rng.uniform(1.0, 4.0, n_valid[name])
+                angle = rng.uniform(0, 2 * np.pi, n_valid[name])
+                floor = np.c_[
+                    radius * np.cos(angle), radius * np.sin(angle), np.zeros(n_valid[name])
+                ]
                 floor[:, :2] += T_odom_base[:2, 3]
-                points = apply(invert(T_odom_base @ TRUE_EXTRINSICS[name]), floor)
-                junk = np.r_[np.full((n_nan, 3), np.nan), np.zeros((n_zero, 3))]
-                points = rng.permutation(np.r_[points, junk])
+                in_lidar = apply(invert(T_odom_base @ TRUE_EXTRINSICS[name]), floor)
+                junk = np.r_[np.full((n_nan[name], 3), np.nan), np.zeros((n_zero, 3))]
+                stacked: NDArray[np.float64] = np.r_[in_lidar, junk]
+                points = stacked[rng.permutation(len(stacked))]
                 writer.write_pointcloud(
-                    f"/{name}/points", stamp, name, points,
+                    f"/{name}/points",
+                    stamp,
+                    f + name,
+                    points,
                     extra_fields={"intensity": rng.uniform(0, 100, len(points))},
                     dtype=np.float64 if name in spec.float64_lidars else np.float32,
                     big_endian=name in spec.big_endian_lidars,
