@@ -59,10 +59,19 @@ class ScanLabels:
     is_bleeding: NDArray[np.bool_]
     object_index: NDArray[np.int16]
 
-    def between(self, t_start_ns: int, t_end_ns: int, scan_period_ns: int) -> PointLabels:
-        """Labels of the scans lying wholly inside `[t_start_ns, t_end_ns]`, in message order:
-        the same rule by which a stop's cloud is accumulated."""
-        inside = (self.stamps_ns >= t_start_ns) & (self.stamps_ns + scan_period_ns <= t_end_ns)
+    def between(
+        self, t_start_ns: int, t_end_ns: int, after_ns: int, before_ns: int = 0
+    ) -> PointLabels:
+        """Labels of the scans with `stamp - before_ns >= t_start_ns` and
+        `stamp + after_ns <= t_end_ns`, in message order.
+
+        `after_ns = period, before_ns = 0` is "wholly inside" for stamps at the scan's start (how
+        this synthesiser stamps); `before_ns = after_ns = period` is the reader's rule, which
+        does not know which end of the scan a driver stamps.
+        """
+        inside = (self.stamps_ns - before_ns >= t_start_ns) & (
+            self.stamps_ns + after_ns <= t_end_ns
+        )
         chosen = np.flatnonzero(inside)
         index = (
             np.concatenate([np.arange(self.offsets[s], self.offsets[s + 1]) for s in chosen])
@@ -130,13 +139,22 @@ class Truth:
         )
 
     def stop_labels(self, stop_index: int, frame: str) -> PointLabels:
-        """Labels lined up with the stop's accumulated cloud (scans wholly inside the stop)."""
+        """Labels lined up with `simulate_problem`'s cloud of this stop (the scans wholly inside
+        the true stop interval)."""
         stop = self.stops[stop_index]
-        period_ns = round(self.lidar(frame).scan_period_s * _NS)
-        # Stop times are float seconds near 1.7e9 (0.2 us resolution); round to whole microseconds.
-        start_ns = round(stop.t_start * 1e6) * 1000
-        end_ns = round(stop.t_end * 1e6) * 1000
-        return self.labels[frame].between(start_ns, end_ns, period_ns)
+        return self.labels[frame].between(
+            _to_ns(stop.t_start), _to_ns(stop.t_end), self._period_ns(frame)
+        )
+
+    def labels_between(self, t_start: float, t_end: float, frame: str) -> PointLabels:
+        """Labels lined up with the cloud `pipeline.io.read_recording` accumulates for a stop it
+        found from `t_start` to `t_end` (ROS seconds): its rule keeps a scan when both
+        `stamp - period` and `stamp + period` lie inside the stop."""
+        period = self._period_ns(frame)
+        return self.labels[frame].between(_to_ns(t_start), _to_ns(t_end), period, period)
+
+    def _period_ns(self, frame: str) -> int:
+        return round(self.lidar(frame).scan_period_s * _NS)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -265,6 +283,11 @@ def load_truth(out_dir: Path | str) -> Truth:
         ),
         labels=labels,
     )
+
+
+def _to_ns(t: float) -> int:
+    """ROS seconds to nanoseconds. A float near 1.7e9 s resolves 0.2 us; stamps are whole us."""
+    return round(t * 1e6) * 1000
 
 
 def _pose_json(T: Matrix4) -> dict[str, list[float]]:
