@@ -34,7 +34,6 @@ class Problem(BaseModel):
     title: str
     status: int
     detail: str
-    instance: str | None = None
 
 
 def problem_document(

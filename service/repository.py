@@ -14,7 +14,6 @@ from typing import Any
 
 from pydantic import ValidationError
 from sqlalchemy import func, select, tuple_, update
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from service.models import (
@@ -210,10 +209,18 @@ def store_result(
     """
     try:
         json.dumps(document, allow_nan=False)
+    except ValueError as err:
+        raise InvalidResultError("result document holds NaN or infinity; a failure must be a "
+                                 "failed check, never a non-finite number") from err
+    except TypeError as err:
+        raise InvalidResultError(f"result document is not JSON: {err}") from err
+    try:
         parsed = ResultDocument.model_validate(document)
-    except (ValueError, TypeError, ValidationError) as err:
+    except ValidationError as err:
         raise InvalidResultError(f"result document does not follow result.json: {err}") from err
     run = _lock_run(session, run_id, lease_owner)
+    if session.get(Result, run_id) is not None:
+        raise RunFinishedError(f"run {run_id} already has a result")
     now = datetime.now(UTC)
     passed = parsed.verdict.passed
     result = Result(
@@ -229,6 +236,7 @@ def store_result(
         created_at=now,
     )
     session.add(result)
+    session.flush()  # the extrinsics rows refer to it
     for frame, lidar in sorted(parsed.lidars.items()):
         if lidar.calibrated is None:
             continue
@@ -255,10 +263,7 @@ def store_result(
             )
         )
     _finish(run, RunStatus.SUCCEEDED, now, error=None)
-    try:
-        session.flush()
-    except IntegrityError as err:
-        raise RunFinishedError(f"run {run_id} already has a result") from err
+    session.flush()
     return result
 
 
