@@ -64,12 +64,11 @@ def read_motion(
     base_frame: str,
 ) -> Motion:
     """Read `/tf_static` and the trajectory (`trajectory`: `auto`, `odometry` or `tf`)."""
-    reader = opened.reader
-    static = [c for c in reader.connections if c.topic == "/tf_static" and c.msgtype in TF_TYPES]
+    static = [c for c in opened.connections if c.topic == "/tf_static" and c.msgtype in TF_TYPES]
     odometry = [
-        c for c in reader.connections if c.topic == odometry_topic and c.msgtype == ODOMETRY
+        c for c in opened.connections if c.topic == odometry_topic and c.msgtype == ODOMETRY
     ]
-    dynamic = [c for c in reader.connections if c.topic == "/tf" and c.msgtype in TF_TYPES]
+    dynamic = [c for c in opened.connections if c.topic == "/tf" and c.msgtype in TF_TYPES]
     use_odometry = trajectory == "odometry" or (
         trajectory == "auto" and sum(c.msgcount for c in odometry) > 0
     )
@@ -80,8 +79,8 @@ def read_motion(
     tree = TransformTree()
     edges: dict[tuple[str, str], _Samples] = defaultdict(_Samples)
     with reading_errors(opened.path, opened.storage):
-        for connection, log_ns, raw in reader.messages(connections=[*static, *chosen]):
-            msg: Any = reader.deserialize(raw, connection.msgtype)
+        for connection, log_ns, raw in opened.messages([*static, *chosen]):
+            msg: Any = opened.deserialize(raw, connection)
             if connection.topic == "/tf_static":
                 tree.add_message(msg)
             elif use_odometry:
@@ -167,9 +166,8 @@ def _edge_to_base(
 def _no_trajectory(
     opened: OpenRecording, trajectory: str, odometry_topic: str, odom_frame: str, base_frame: str
 ) -> NoTrajectoryError:
-    reader = opened.reader
-    others = sorted({c.topic for c in reader.connections if c.msgtype == ODOMETRY})
-    has_tf = any(c.topic == "/tf" and c.msgtype in TF_TYPES for c in reader.connections)
+    others = sorted({c.topic for c in opened.connections if c.msgtype == ODOMETRY})
+    has_tf = any(c.topic == "/tf" and c.msgtype in TF_TYPES for c in opened.connections)
     wanted = {
         "odometry": f"nav_msgs/Odometry on {odometry_topic}",
         "tf": "/tf",

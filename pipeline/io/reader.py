@@ -107,8 +107,7 @@ def summarize_recording(
         )
         stops = _stops(opened, motion, config)
         clouds, lidar_stats = _read_clouds(opened, topics, stops, config, keep_points)
-        reader = opened.reader
-        t_start, t_end, count = reader.start_time, reader.end_time, reader.message_count
+        t_start, t_end, count = opened.start_time, opened.end_time, opened.message_count
     lidars, notes = _lidars(opened, lidar_stats, clouds, motion, config)
     summary = RecordingSummary(
         path=str(path),
@@ -170,7 +169,7 @@ def _lidar_topics(opened: OpenRecording, wanted: tuple[str, ...]) -> dict[str, l
             )
         clouds = {topic: clouds[topic] for topic in wanted}
     if not clouds:
-        others = sorted({c.topic for c in opened.reader.connections})
+        others = sorted({c.topic for c in opened.connections})
         raise NoPointCloudError(
             f"{opened.path} has no sensor_msgs/PointCloud2 topic (topics: {others or 'none'}); "
             "record each LiDAR's point cloud, one PointCloud2 topic per LiDAR"
@@ -207,14 +206,13 @@ def _read_clouds(
     config: ReaderConfig,
     keep_points: bool,
 ) -> tuple[StopClouds, dict[str, _TopicStats]]:
-    reader = opened.reader
     clouds = StopClouds(stops, keep_points=keep_points)
     stats = {topic: _TopicStats(topic) for topic in topics}
     frame_topic: dict[str, str] = {}
     connections = [c for group in topics.values() for c in group]
     with reading_errors(opened.path, opened.storage):
-        for connection, log_ns, raw in reader.messages(connections=connections):
-            msg: Any = reader.deserialize(raw, connection.msgtype)
+        for connection, log_ns, raw in opened.messages(connections):
+            msg: Any = opened.deserialize(raw, connection)
             frame = normalize_frame(msg.header.frame_id)
             topic = connection.topic
             if frame_topic.setdefault(frame, topic) != topic:
@@ -230,7 +228,9 @@ def _read_clouds(
             stats[topic].add(frame, stamp, point_count(msg))
             points = None
             if clouds.stop_index(stamp) is not None:
-                points = decode_xyz(msg, topic, drop_zero_points=config.drop_zero_points)
+                points = decode_xyz(
+                    msg, topic, drop_zero_points=config.drop_zero_points, dtype=None
+                )
             clouds.add_scan(frame, stamp, points)
             clouds.close_before(log_ns - _CLOSE_SLACK_NS)
     clouds.close_all()

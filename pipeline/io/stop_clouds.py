@@ -12,6 +12,7 @@ import bisect
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,7 +23,7 @@ from pipeline.io.stops import StopSpan
 @dataclass
 class _Candidate:
     stamp_ns: int
-    points: NDArray[np.float64] | None
+    points: NDArray[np.floating[Any]] | None
     valid: int
 
 
@@ -59,7 +60,7 @@ class StopClouds:
             return index
         return None
 
-    def add_scan(self, frame: str, stamp_ns: int, points: NDArray[np.float64] | None) -> None:
+    def add_scan(self, frame: str, stamp_ns: int, points: NDArray[np.floating[Any]] | None) -> None:
         """Record every scan's stamp; `points` (decoded if `stop_index` found a stop) wait there."""
         self._stamps[frame].append(stamp_ns)
         index = self.stop_index(stamp_ns)
@@ -96,7 +97,9 @@ class StopClouds:
             points = None
             if self.keep_points:
                 arrays = [c.points for c in inside if c.points is not None]
-                points = np.concatenate(arrays) if arrays else np.empty((0, 3))
+                # Scans wait in their stored type (float32, half the memory) and become
+                # float64 in this one copy.
+                points = np.concatenate(arrays, dtype=np.float64) if arrays else np.empty((0, 3))
             self.closed[index][frame] = StopCloud(
                 points, sum(c.valid for c in inside), len(inside), len(candidates)
             )

@@ -289,3 +289,32 @@ def test_bag_directory_mixing_storages_is_refused(
     shutil.copy(recordings["bare-db3"], mixed / "part_1.db3")
     with pytest.raises(CorruptRecordingError, match=r"mixes MCAP and sqlite3"):
         read_recording(mixed)
+
+
+def test_ros1_bag_recorded_with_old_tf_message_type(tmp_path: Path) -> None:
+    """Bags from ROS 1's `tf` package carry `tf/tfMessage`, decoded from the bag's definition."""
+    from rosbags import rosbag1
+
+    source = tmp_path / "tf2.bag"
+    truth = write_recording(source, WriterFormat.ROS1, Spec(stops=2, points=50, trajectory="tf"))
+    renamed = tmp_path / "tf1.bag"
+    with rosbag1.Reader(source) as reader, rosbag1.Writer(renamed) as writer:
+        out = {}
+        for c in reader.connections:
+            msgtype = "tf/msg/tfMessage" if c.msgtype == "tf2_msgs/msg/TFMessage" else c.msgtype
+            out[c.id] = writer.add_connection(
+                c.topic, msgtype, msgdef=c.msgdef.data, md5sum=c.digest, callerid="/rec"
+            )
+        for c, stamp, raw in reader.messages():
+            writer.write(out[c.id], stamp, raw)
+
+    problem = read_recording(renamed)
+
+    assert problem.frames == ("lidar_front", "lidar_rear")
+    np.testing.assert_allclose(
+        problem.lidar("lidar_rear").T_base_lidar,
+        truth.T_base_lidar_initial["lidar_rear"],
+        atol=1e-9,
+    )
+    for stop, T_true in zip(problem.stops, truth.T_odom_base, strict=True):
+        assert pose_difference(stop.T_odom_base, T_true)[0] < 1e-9
