@@ -34,30 +34,37 @@ class Hits:
 
 
 def cast(
-    scene: Scene, origin: NDArray[np.float64], directions: NDArray[np.float64], max_range: float
+    scene: Scene, origins: NDArray[np.float64], directions: NDArray[np.float64], max_range: float
 ) -> Hits:
-    """Cast (N, 3) unit `directions` (world frame) from `origin` (3,), ignoring the robot body."""
+    """Cast (N, 3) unit `directions` (world frame) from `origins` ((3,), or (N, 3) per ray),
+    ignoring the robot body. Rays in a run with the same origin go to MuJoCo in one batch."""
     n = len(directions)
+    origins = np.broadcast_to(np.asarray(origins, dtype=np.float64), (n, 3))
     geom = np.empty(n, dtype=np.int32)
     dist = np.empty(n, dtype=np.float64)
-    normal = np.empty(3 * n, dtype=np.float64)
-    if n:
-        mujoco.mj_multiRay(
-            scene.model,
-            scene.data,
-            np.ascontiguousarray(origin, dtype=np.float64),
-            np.ascontiguousarray(directions, dtype=np.float64).reshape(-1),
-            None,
-            1,
-            scene.robot_body_id,
-            geom,
-            dist,
-            normal,
-            n,
-            float(max_range),
-        )
+    normal = np.empty((n, 3), dtype=np.float64)
+    flat = np.ascontiguousarray(directions, dtype=np.float64)
+    starts = np.concatenate(
+        [[0], np.flatnonzero(np.any(np.diff(origins, axis=0) != 0, axis=1)) + 1]
+    )
+    for start, end in zip(starts.tolist(), [*starts[1:].tolist(), n], strict=True):
+        if end > start:
+            mujoco.mj_multiRay(
+                scene.model,
+                scene.data,
+                np.ascontiguousarray(origins[start]),
+                flat[start:end].reshape(-1),
+                None,
+                1,
+                scene.robot_body_id,
+                geom[start:end],
+                dist[start:end],
+                normal[start:end].reshape(-1),
+                end - start,
+                float(max_range),
+            )
     hit = (geom >= 0) & (dist >= 0) & (dist <= max_range)
-    cos_incidence = np.abs(np.einsum("ij,ij->i", normal.reshape(n, 3), directions))
+    cos_incidence = np.abs(np.einsum("ij,ij->i", normal, directions))
     return Hits(
         range_m=np.where(hit, dist, np.inf),
         geom=np.where(hit, geom, -1).astype(np.int32),
@@ -79,7 +86,7 @@ class Returns:
 
 def cast_with_footprint(
     scene: Scene,
-    origin: NDArray[np.float64],
+    origins: NDArray[np.float64],
     directions: NDArray[np.float64],
     *,
     max_range: float,
@@ -94,20 +101,24 @@ def cast_with_footprint(
     A blended range is `fg + w * (bg - fg)` between the nearest and farthest surface in the
     footprint, `w ~ Beta` centred on the share of the footprint on the far surface. A sub-ray
     that misses everything adds no energy, so an edge against empty space does not bleed.
+    `origins` is (3,) or (N, 3) per ray, as for `cast`.
     """
-    centre = cast(scene, origin, directions, max_range)
+    origins = np.broadcast_to(np.asarray(origins, dtype=np.float64), directions.shape)
+    centre = cast(scene, origins, directions, max_range)
     range_m = centre.range_m.copy()
     geom = centre.geom.copy()
     is_bleeding = np.zeros(len(directions), dtype=bool)
     footprint = math.radians(footprint_deg)
     hit = centre.geom >= 0
-    near = hit & _near_objects(scene, origin, directions, centre.range_m, footprint)
+    near = hit & _near_objects(scene, origins, directions, centre.range_m, footprint)
     idx = np.flatnonzero(near)
     if footprint <= 0 or len(idx) == 0:
         return Returns(range_m, geom, centre.cos_incidence, is_bleeding)
 
     sub_dirs = _footprint_rays(directions[idx], footprint)
-    sub = cast(scene, origin, sub_dirs.reshape(-1, 3), max_range)
+    sub = cast(
+        scene, np.repeat(origins[idx], _SUB_RAYS, axis=0), sub_dirs.reshape(-1, 3), max_range
+    )
     ranges = np.column_stack([centre.range_m[idx], sub.range_m.reshape(len(idx), _SUB_RAYS)])
     geoms = np.column_stack([centre.geom[idx], sub.geom.reshape(len(idx), _SUB_RAYS)])
     hit = geoms >= 0
@@ -124,7 +135,7 @@ def cast_with_footprint(
     weight = rng.beta(1.0 + 3.0 * far_share, 1.0 + 3.0 * (1.0 - far_share))
     blended = fg + weight * (bg - fg)
     rows = idx[mixed]
-    distance, nearest = scene.nearest_surface(origin + directions[rows] * blended[:, None])
+    distance, nearest = scene.nearest_surface(origins[rows] + directions[rows] * blended[:, None])
     range_m[rows] = blended
     geom[rows] = scene.object_geom[nearest]
     is_bleeding[rows] = distance > label_margin_m
@@ -133,7 +144,7 @@ def cast_with_footprint(
 
 def _near_objects(
     scene: Scene,
-    origin: NDArray[np.float64],
+    origins: NDArray[np.float64],
     directions: NDArray[np.float64],
     range_m: NDArray[np.float64],
     footprint: float,
@@ -143,12 +154,18 @@ def _near_objects(
     reaches the floor before an object cannot straddle that object's edge."""
     if not scene.objects:
         return np.zeros(len(directions), dtype=bool)
-    centres = np.array([obj.T_world_object[:3, 3] for obj in scene.objects]) - origin
+    centres = np.array([obj.T_world_object[:3, 3] for obj in scene.objects])
     radius = np.array([obj.bounding_radius for obj in scene.objects])
-    along = directions @ centres.T
+    # Per ray and object: distance along the ray to the centre's foot, and |centre - origin|^2.
+    along = directions @ centres.T - np.einsum("ij,ij->i", directions, origins)[:, None]
+    to_centre_sq = (
+        np.sum(centres**2, axis=1)
+        - 2.0 * origins @ centres.T
+        + np.einsum("ij,ij->i", origins, origins)[:, None]
+    )
     reach = np.minimum(range_m + _MIN_GAP_M, np.finfo(np.float64).max)[:, None]
     closest = np.clip(along, 0.0, reach)
-    distance_sq = np.sum(centres**2, axis=1) - 2.0 * closest * along + closest**2
+    distance_sq = to_centre_sq - 2.0 * closest * along + closest**2
     limit = radius + closest * math.tan(footprint)
     return np.asarray(np.any(distance_sq <= limit**2, axis=1))
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -152,22 +152,38 @@ class Scene:
     geom_object: NDArray[np.int32]
     object_geom: NDArray[np.int32]
     geom_reflectivity: NDArray[np.float64]
+    _placed_rotation: NDArray[np.float64] = field(default_factory=lambda: np.full((3, 3), np.nan))
 
     def nearest_surface(
         self, points: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.int16]]:
         """For world `points` (N, 3): distance (N,) to the nearest surface (floor or object) and
         that surface's object index (N,), -1 for the floor. Analytic, independent of MuJoCo."""
-        distances = [np.abs(points[:, 2])] + [obj.distance(points) for obj in self.objects]
-        stacked = np.stack(distances)
-        nearest = np.argmin(stacked, axis=0)
-        return stacked[nearest, np.arange(len(points))], (nearest - 1).astype(np.int16)
+        distance = np.abs(points[:, 2])
+        nearest = np.full(len(points), -1, dtype=np.int16)
+        for index, obj in enumerate(self.objects):
+            # Only points that could beat the current best need the exact distance.
+            to_centre = np.linalg.norm(points - obj.T_world_object[:3, 3], axis=1)
+            rows = np.flatnonzero(to_centre - obj.bounding_radius < distance)
+            if len(rows) == 0:
+                continue
+            candidate = obj.distance(points[rows])
+            better = candidate < distance[rows]
+            distance[rows[better]] = candidate[better]
+            nearest[rows[better]] = index
+        return distance, nearest
 
     def place_robot(self, T_world_base: Matrix4) -> None:
         """Move the robot body (a mocap body) and recompute the world's geometry."""
-        translation, quat = to_translation_xyzw(T_world_base)
-        self.data.mocap_pos[0] = translation
-        self.data.mocap_quat[0] = [quat[3], quat[0], quat[1], quat[2]]  # MuJoCo: w, x, y, z
+        if np.array_equal(self.data.mocap_pos[0], T_world_base[:3, 3]) and np.array_equal(
+            self._placed_rotation, T_world_base[:3, :3]
+        ):
+            return
+        self.data.mocap_pos[0] = T_world_base[:3, 3]
+        mujoco.mju_mat2Quat(
+            self.data.mocap_quat[0], np.ascontiguousarray(T_world_base[:3, :3]).ravel()
+        )
+        self._placed_rotation[:] = T_world_base[:3, :3]
         # Ray casting reads geom poses from the data; without a forward pass every ray misses.
         mujoco.mj_forward(self.model, self.data)
 

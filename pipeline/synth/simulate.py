@@ -90,29 +90,28 @@ def scan(
     else:
         poses = T_world_lidar(np.array([t0]))
 
-    ranges, geoms, cosines, bleeding = [], [], [], []
-    for start, end, pose in zip(starts, ends, poses, strict=True):
-        directions_world = firing.directions[start:end] @ pose[:3, :3].T
-        returns = cast_with_footprint(
-            scene,
-            pose[:3, 3],
-            directions_world,
-            max_range=lidar.max_range_m,
-            footprint_deg=lidar.footprint_deg,
-            label_margin_m=3.0 * lidar.range_noise_m,
-            rng=rng,
-        )
-        ranges.append(returns.range_m)
-        geoms.append(returns.geom)
-        cosines.append(returns.cos_incidence)
-        bleeding.append(returns.is_bleeding)
-    range_m = np.concatenate(ranges) if ranges else np.zeros(0)
-    geom = np.concatenate(geoms) if geoms else np.zeros(0, dtype=np.int32)
+    # Each ray is cast from its slice's pose: origins and directions in the world, per ray.
+    if len(poses) == 1:
+        origins, directions = poses[0, :3, 3], firing.directions @ poses[0, :3, :3].T
+    else:
+        slice_of_ray = np.repeat(np.arange(len(poses)), ends - starts)
+        origins = poses[slice_of_ray, :3, 3]
+        directions = np.einsum("nij,nj->ni", poses[slice_of_ray, :3, :3], firing.directions)
+    returns = cast_with_footprint(
+        scene,
+        origins,
+        directions,
+        max_range=lidar.max_range_m,
+        footprint_deg=lidar.footprint_deg,
+        label_margin_m=3.0 * lidar.range_noise_m,
+        rng=rng,
+    )
+    range_m, geom = returns.range_m, returns.geom
     keep = np.isfinite(range_m) & (range_m >= lidar.min_range_m)
     measured = range_m[keep] + rng.normal(0.0, lidar.range_noise_m, size=int(keep.sum()))
     geom = geom[keep]
     intensity = np.clip(
-        _MAX_INTENSITY * scene.geom_reflectivity[geom] * np.concatenate(cosines)[keep],
+        _MAX_INTENSITY * scene.geom_reflectivity[geom] * returns.cos_incidence[keep],
         0.0,
         _MAX_INTENSITY,
     )
@@ -121,7 +120,7 @@ def scan(
         points=firing.directions[keep] * measured[:, None],
         times=firing.times[keep],
         intensity=intensity.astype(np.float32),
-        is_bleeding=np.concatenate(bleeding)[keep] if bleeding else np.zeros(0, dtype=bool),
+        is_bleeding=returns.is_bleeding[keep],
         object_index=scene.geom_object[geom].astype(np.int16),
     )
 

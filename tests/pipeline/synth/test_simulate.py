@@ -164,7 +164,7 @@ def test_scan_with_a_constant_pose_function_equals_a_fixed_pose() -> None:
         np.random.default_rng(5),
         rate_scale=0.2,
     )
-    np.testing.assert_array_equal(fixed.points, moving.points)
+    np.testing.assert_allclose(fixed.points, moving.points, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(fixed.is_bleeding, moving.is_bleeding)
     assert len(fixed) > 500
 
