@@ -204,8 +204,8 @@ def _registry() -> dict[str, ScenarioSpec]:
                 "scene": SceneSpec(
                     object_kinds=kinds,
                     rings=(
-                        Ring(r_min_m=0.5, r_max_m=1.6, count=(6, 8)),
-                        Ring(r_min_m=3.4, r_max_m=4.4, count=(14, 18)),
+                        Ring(r_min_m=0.3, r_max_m=1.7, count=(6, 8)),
+                        Ring(r_min_m=3.3, r_max_m=3.9, count=(16, 20)),
                     ),
                 ),
             }

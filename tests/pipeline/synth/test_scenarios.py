@@ -9,6 +9,7 @@ import pytest
 
 from pipeline.errors import ConfigError
 from pipeline.synth.scenarios import get_scenario, scenario_names
+from pipeline.synth.simulate import make_world
 
 REQUIRED = {
     "set1-box",
@@ -52,3 +53,15 @@ def test_paper_tilt_of_set1() -> None:
     front = get_scenario("set1-box").lidars[0]
     axis = front.T_base_lidar()[:3, :3] @ front.model.optical_axis
     assert math.degrees(math.asin(-axis[2])) == pytest.approx(35.4)
+
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_every_scenario_builds_its_world(name: str) -> None:
+    for seed in range(2):
+        world = make_world(name, seed)
+        spec = world.spec
+        assert world.scene.model.ngeom == 2 + len(world.scene.objects)
+        assert len(world.scene.objects) >= sum(ring.count[0] for ring in spec.scene.rings)
+        assert world.scan_count(0) == round(
+            spec.motion.duration_s / spec.lidars[0].model.scan_period_s
+        )
