@@ -5,6 +5,7 @@ In memory: `simulate_problem(name, seed)` -> `(CalibrationProblem, Truth)`; on d
 """
 
 from pipeline.synth.lidar_models import LidarModel, Mid70, SpinningLidar
+from pipeline.synth.recording import write_recording
 from pipeline.synth.scenarios import LidarMount, ScenarioSpec, get_scenario, scenario_names
 from pipeline.synth.simulate import LabelledScan, World, make_world, scan, simulate_problem
 from pipeline.synth.truth import LidarTruth, PointLabels, ScanLabels, StopTruth, Truth, load_truth
@@ -28,4 +29,5 @@ __all__ = [
     "scan",
     "scenario_names",
     "simulate_problem",
+    "write_recording",
 ]
