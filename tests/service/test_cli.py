@@ -1,0 +1,97 @@
+"""The service's CLI commands through the root `fleetcal` app: keys, db, openapi."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from service.auth import authenticate
+from service.db import Database
+from service.models import Scope
+from service.openapi import OPENAPI_PATH
+from service.settings import Settings
+from workers.cli import app
+
+runner = CliRunner()
+
+
+def _fleetcal(*args: str) -> tuple[int, str, str]:
+    result = runner.invoke(app, list(args))
+    return result.exit_code, result.stdout, result.stderr
+
+
+def test_keys_create_prints_the_key_once_and_it_works(tmp_path: Path) -> None:
+    code, out, err = _fleetcal(
+        "keys",
+        "create",
+        "--scope",
+        "upload",
+        "--robot",
+        "R1",
+        "--name",
+        "line 3",
+        "--data-dir",
+        str(tmp_path),
+    )
+    assert code == 0, err
+    secret = out.strip()
+    assert secret.startswith("fck_") and "\n" not in secret
+    assert "will not be shown again" in err and secret not in err
+
+    db = Database.from_settings(Settings(data_dir=tmp_path))
+    with db.session() as session:
+        principal = authenticate(session, secret)
+    db.dispose()
+    assert principal is not None
+    assert principal.scopes == {Scope.UPLOAD} and principal.robot_id == "R1"
+
+    code, out, _ = _fleetcal("keys", "list", "--data-dir", str(tmp_path))
+    assert code == 0 and principal.key_id in out and "R1" in out and "line 3" in out
+    assert secret not in out and secret.split("_")[2] not in out
+
+    code, out, _ = _fleetcal("keys", "revoke", principal.key_id, "--data-dir", str(tmp_path))
+    assert code == 0 and "revoked" in out
+    db = Database.from_settings(Settings(data_dir=tmp_path))
+    with db.session() as session:
+        assert authenticate(session, secret) is None
+    db.dispose()
+    _, out, _ = _fleetcal("keys", "list", "--data-dir", str(tmp_path))
+    assert "revoked" in out
+
+
+def test_keys_create_refuses_bad_requests(tmp_path: Path) -> None:
+    code, _, err = _fleetcal(
+        "keys", "create", "--scope", "read", "--robot", "R1", "--data-dir", str(tmp_path)
+    )
+    assert code == 2 and "only --scope upload" in err
+    code, _, err = _fleetcal("keys", "create", "--scope", "root", "--data-dir", str(tmp_path))
+    assert code == 2
+    code, _, err = _fleetcal(
+        "keys", "create", "--scope", "upload", "--robot", "a/b", "--data-dir", str(tmp_path)
+    )
+    assert code == 2 and "robot id" in err
+    code, _, err = _fleetcal("keys", "revoke", "nope", "--data-dir", str(tmp_path))
+    assert code == 1 and "no key" in err
+
+
+def test_db_upgrade_and_current(tmp_path: Path) -> None:
+    code, _, _ = _fleetcal("db", "current", "--data-dir", str(tmp_path))
+    assert code == 1
+    code, out, err = _fleetcal("db", "upgrade", "--data-dir", str(tmp_path))
+    assert code == 0, err
+    assert "at revision 0001" in out and (tmp_path / "fleetcal.db").is_file()
+    code, out, _ = _fleetcal("db", "current", "--data-dir", str(tmp_path))
+    assert code == 0 and "up to date" in out
+
+
+def test_openapi_prints_writes_and_checks(tmp_path: Path) -> None:
+    code, out, _ = _fleetcal("openapi")
+    assert code == 0 and out == OPENAPI_PATH.read_text()
+    target = tmp_path / "openapi.json"
+    assert _fleetcal("openapi", "--output", str(target))[0] == 0
+    assert target.read_text() == out
+    assert _fleetcal("openapi", "--output", str(target), "--check")[0] == 0
+    target.write_text("{}")
+    code, _, err = _fleetcal("openapi", "--output", str(target), "--check")
+    assert code == 1 and "out of date" in err
