@@ -58,8 +58,10 @@ def detect_format(path: Path) -> RecordingFormat:
     """
     path = Path(path)
     if path.is_dir():
-        if any(_file_format(child) in (RecordingFormat.MCAP, RecordingFormat.SQLITE3)
-               for child in sorted(path.iterdir()) if child.is_file()):
+        # metadata.yaml also marks a bag whose storage files are compressed (.mcap.zstd).
+        if (path / "metadata.yaml").is_file() or any(
+                _file_format(child) in (RecordingFormat.MCAP, RecordingFormat.SQLITE3)
+                for child in sorted(path.iterdir()) if child.is_file()):
             return RecordingFormat.ROS2_DIRECTORY
         raise UnknownFormatError(
             f"{path} is a directory without a ROS 2 bag in it (no .mcap or .db3 storage file); "

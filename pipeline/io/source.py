@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import apsw
+import yaml
 from rosbags import rosbag1, rosbag2
 from rosbags.interfaces import Connection
 from rosbags.serde import SerdeError
@@ -190,12 +191,30 @@ def _storage_format(path: Path, fmt: RecordingFormat) -> RecordingFormat:
     """MCAP, sqlite3 or ROS 1: what the reader will find inside a directory or file."""
     if fmt is not RecordingFormat.ROS2_DIRECTORY:
         return fmt
+    declared = _declared_storage(path / "metadata.yaml")
+    if declared is not None:
+        return declared
     kinds = {kind for child in _storage_files(path) if (kind := _file_format(child)) is not None}
     if len(kinds) > 1:
         raise CorruptRecordingError(
             f"{path} mixes MCAP and sqlite3 storage files; a bag directory holds one kind"
         )
     return kinds.pop()
+
+
+def _declared_storage(metadata: Path) -> RecordingFormat | None:
+    """The storage a bag's metadata.yaml names (its files may be compressed, so no magic)."""
+    if not metadata.is_file():
+        return None
+    try:
+        info = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"]
+        identifier = str(info["storage_identifier"])
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as err:
+        raise CorruptRecordingError(
+            f"{metadata} cannot be read ({_cause(err)}); it is damaged: copy the bag directory "
+            "again, or remove metadata.yaml to read the storage files alone"
+        ) from err
+    return {"mcap": RecordingFormat.MCAP, "sqlite3": RecordingFormat.SQLITE3}.get(identifier)
 
 
 def _storage_files(directory: Path) -> list[Path]:
@@ -219,7 +238,7 @@ def _named_for_rosbags(
 
 
 def _cause(err: BaseException) -> str:
-    text = str(err).strip() or type(err).__name__
+    text = " ".join(str(err).split()) or type(err).__name__  # one line, whatever the library wrote
     return text if len(text) < 200 else text[:200] + "..."
 
 

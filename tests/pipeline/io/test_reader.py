@@ -318,3 +318,13 @@ def test_ros1_bag_recorded_with_old_tf_message_type(tmp_path: Path) -> None:
     )
     for stop, T_true in zip(problem.stops, truth.T_odom_base, strict=True):
         assert pose_difference(stop.T_odom_base, T_true)[0] < 1e-9
+
+
+def test_damaged_metadata_yaml(recordings: dict[str, Path], tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    shutil.copytree(recordings["ros2-mcap-dir"], bag)
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed")
+    with pytest.raises(
+        CorruptRecordingError, match=r"metadata.yaml cannot be read .*remove metadata"
+    ):
+        read_recording(bag)
