@@ -12,6 +12,7 @@ import typer
 
 _COMMAND_MODULES: tuple[str, ...] = (
     "inspect",
+    "denoise",
     "synth",
 )
 

@@ -1,0 +1,175 @@
+"""Stage 1: remove bleeding points (mixed returns smeared from object edges towards the background).
+
+`denoise(points, config, optical_axis)` is what the pipeline calls per LiDAR and stop; the
+filters themselves (`filters`) and the observation centre (`centre`) are pure functions too.
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+from pydantic import BaseModel, ConfigDict, Field
+
+from pipeline.denoise.centre import fit_floor_plane, observation_centre
+from pipeline.denoise.filters import (
+    KeepMask,
+    Points,
+    as_cloud,
+    dsor_keep,
+    dsor_mask,
+    global_threshold,
+    knn_mean_distances,
+    nearest_neighbours,
+    pattern_keep,
+    pattern_mask,
+    proposed_keep,
+    proposed_mask,
+    sor_keep,
+    sor_mask,
+)
+
+__all__ = [
+    "DenoiseConfig",
+    "DenoiseMethod",
+    "DenoiseResult",
+    "KeepMask",
+    "as_cloud",
+    "denoise",
+    "dsor_mask",
+    "fit_floor_plane",
+    "global_threshold",
+    "knn_mean_distances",
+    "observation_centre",
+    "pattern_mask",
+    "proposed_mask",
+    "sor_mask",
+]
+
+
+class DenoiseMethod(enum.StrEnum):
+    PATTERN = "pattern"
+    """Ours: sparse for its place in the scan pattern and seen edge-on (see `pattern_keep`)."""
+    PROPOSED = "proposed"
+    """The paper's Algorithm 1: threshold `H_g * C_r * D_n`, D_n from the observation centre."""
+    FLOORED = "floored"
+    """Algorithm 1 never stricter than SOR: `H_g * max(1, C_r * D_n)`."""
+    SOR = "sor"
+    """Statistical outlier removal: one threshold `H_g` for every point."""
+    DSOR = "dsor"
+    """Dynamic SOR: threshold `H_g * C_r * r_n`, r_n the range from the sensor."""
+
+
+class DenoiseConfig(BaseModel):
+    """Stage 1's parameters. `k`, `cs`, `cr` are the paper's (`k = 20`, `C_s = 0.01`,
+    `C_r = 3.0`); `density_ratio`, `beam_cos` and `cell_deg` belong to `pattern` only."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    enabled: bool = True
+    method: DenoiseMethod = DenoiseMethod.PATTERN
+    k: int = Field(default=20, ge=1, description="neighbours per point for the mean distance mu_n")
+    cs: float = Field(default=0.01, description="C_s: global threshold H_g = mu + sigma * C_s")
+    cr: float = Field(default=3.0, gt=0.0, description="C_r: dynamic threshold factor")
+    density_ratio: float = Field(
+        default=1.8, gt=0.0, description="pattern: mu_n over the expected spacing to be suspect"
+    )
+    beam_cos: float = Field(
+        default=0.2, ge=0.0, le=1.0, description="pattern: |cos| beam vs local normal for edge-on"
+    )
+    cell_deg: float = Field(
+        default=5.0, gt=0.0, le=90.0, description="pattern: direction cell for the scan's spacing"
+    )
+    floor_distance_m: float = Field(
+        default=0.05, gt=0.0, description="RANSAC inlier distance of the floor fit (metres)"
+    )
+    floor_iterations: int = Field(default=200, ge=1, description="RANSAC hypotheses for the floor")
+    seed: int = Field(default=0, description="seed of the floor RANSAC (results are reproducible)")
+
+
+@dataclass(frozen=True)
+class DenoiseResult:
+    """What stage 1 did to one cloud.
+
+    `keep`: (N,) bool, True = keep. `observation_centre`: (3,) in the LiDAR frame for the methods
+    that use one, else None. `note`: why the cloud was left untouched when it was (disabled, too
+    few points to judge); None when the filter ran. `seconds`: wall time of the call.
+    """
+
+    keep: KeepMask
+    method: DenoiseMethod
+    seconds: float
+    observation_centre: Points | None = None
+    note: str | None = None
+
+    @property
+    def removed_points(self) -> int:
+        return int(self.keep.size - np.count_nonzero(self.keep))
+
+
+def denoise(
+    points: ArrayLike,
+    config: DenoiseConfig | None = None,
+    optical_axis: Sequence[float] | ArrayLike = (1.0, 0.0, 0.0),
+    floor_plane: ArrayLike | None = None,
+) -> DenoiseResult:
+    """Stage 1 on one LiDAR's accumulated cloud of one stop. The pipeline calls
+
+        result = denoise(stop.clouds[frame], config.denoise, optical_axis=lidar_optical_axis)
+        cloud = stop.clouds[frame][result.keep]
+
+    `points`: (N, 3) in the LiDAR frame (sensor at the origin). `optical_axis`: (3,) direction of
+    the scan pattern's centre in that frame (Livox Mid-70: +x); only `proposed` and `floored`
+    use it. `floor_plane`: optional (4,) `[a, b, c, d]`, `a x + b y + c z + d = 0` in the LiDAR
+    frame, for the observation centre; fitted here when omitted.
+
+    Defined results rather than errors: a cloud of at most `k` points is kept whole (there are
+    not `k` neighbours to judge density by) and `note` says so; duplicated points and a cloud
+    collapsed to one spot have zero neighbour distances and are kept. Non-finite coordinates or
+    a wrong shape raise `BadInputError`.
+    """
+    cfg = config if config is not None else DenoiseConfig()
+    start = time.perf_counter()
+    cloud = as_cloud(points)
+    if not cfg.enabled:
+        return _untouched(cloud, cfg, start, "stage 1 disabled in the config")
+    if len(cloud) <= cfg.k:
+        return _untouched(
+            cloud, cfg, start, f"{len(cloud)} points are too few to judge with k={cfg.k}; kept all"
+        )
+    neighbours = nearest_neighbours(cloud, cfg.k)
+    mu = neighbours.mean_distance
+    centre: Points | None = None
+    if cfg.method is DenoiseMethod.PATTERN:
+        keep = pattern_keep(
+            neighbours,
+            cloud,
+            density_ratio=cfg.density_ratio,
+            beam_cos=cfg.beam_cos,
+            cell_deg=cfg.cell_deg,
+        )
+    elif cfg.method is DenoiseMethod.SOR:
+        keep = sor_keep(mu, cfg.cs)
+    elif cfg.method is DenoiseMethod.DSOR:
+        keep = dsor_keep(mu, cloud, cfg.cs, cfg.cr)
+    else:
+        centre = observation_centre(
+            cloud,
+            optical_axis,
+            floor_plane,
+            floor_distance_m=cfg.floor_distance_m,
+            floor_iterations=cfg.floor_iterations,
+            seed=cfg.seed,
+        )
+        floored = cfg.method is DenoiseMethod.FLOORED
+        keep = proposed_keep(mu, cloud, centre, cfg.cs, cfg.cr, floored=floored)
+    return DenoiseResult(keep, cfg.method, time.perf_counter() - start, centre)
+
+
+def _untouched(cloud: Points, cfg: DenoiseConfig, start: float, note: str) -> DenoiseResult:
+    keep = np.ones(len(cloud), dtype=np.bool_)
+    return DenoiseResult(keep, cfg.method, time.perf_counter() - start, None, note)
