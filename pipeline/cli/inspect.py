@@ -99,9 +99,11 @@ def render(document: dict[str, Any]) -> str:
         )
     stops = document["stops"]
     mean = sum(stop["duration"] for stop in stops) / len(stops)
-    lines.append(f"stops       {len(stops)} (mean {mean:.1f} s)")
+    lines.append(f"stops       {len(stops)} (mean {mean:.1f} s; times from the recording's start)")
+    t0 = document["start"]
     lines += [
-        f"  {k:>3}  {stop['start']:.2f} - {stop['end']:.2f} s  ({stop['duration']:.1f} s)"
+        f"  {k:>3}  {stop['start'] - t0:7.2f} - {stop['end'] - t0:7.2f} s"
+        f"  ({stop['duration']:.1f} s)"
         for k, stop in enumerate(stops)
     ]
     lines.append(f"warnings    {len(document['warnings']) or 'none'}")
