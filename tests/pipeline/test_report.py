@@ -1,0 +1,184 @@
+"""Report images: the maps are placed with the right poses (the truth makes the LiDARs agree, the
+initial extrinsics do not), the adapter reads a calibration result consistently, and the PNGs show
+each LiDAR in its own colour in both panels."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+from PIL import Image
+from pykdtree.kdtree import KDTree
+
+from pipeline.calibrate import calibrate
+from pipeline.config import config_from_mapping
+from pipeline.problem import CalibrationProblem
+from pipeline.report import (
+    REPORT_IMAGES,
+    ReportInput,
+    floor_height,
+    lidar_colour,
+    map_poses,
+    render,
+    report_input,
+)
+from pipeline.synth import Truth, simulate_problem
+from pipeline.transforms import invert
+
+
+@pytest.fixture(scope="module")
+def tiny() -> tuple[CalibrationProblem, Truth]:
+    return simulate_problem("tiny", seed=0)
+
+
+@pytest.fixture(scope="module")
+def truth_input(tiny: tuple[CalibrationProblem, Truth]) -> ReportInput:
+    """Before: odometry and tf_static as recorded; after: the synthesiser's truth."""
+    problem, truth = tiny
+    frames = problem.frames
+    return ReportInput(
+        frames=frames,
+        clouds=tuple(tuple(stop.clouds[f] for stop in problem.stops) for f in frames),
+        T_W_lidar_before=map_poses(
+            np.stack([stop.T_odom_base for stop in problem.stops]),
+            [problem.lidar(f).T_base_lidar for f in frames],
+        ),
+        T_W_lidar_after=map_poses(
+            np.stack([stop.T_odom_base_true for stop in truth.stops]),
+            [truth.lidar(f).T_base_lidar_true for f in frames],
+        ),
+        error_per_iteration=(0.09, 0.03, 0.004, 0.0015),
+        metric_error_initial=0.09,
+        metric_error_final=0.0015,
+        passed=True,
+        converged=True,
+    )
+
+
+def object_distance_to_reference(data: ReportInput, after: bool) -> float:
+    """Median distance of the other LiDAR's object points to the reference's map, in metres."""
+    placed = data.placed(after=after)
+    floor = floor_height(np.concatenate(data.placed(after=True)))
+    objects = [p[p[:, 2] > floor + 0.05] for p in placed]
+    distance, _ = KDTree(objects[0]).query(objects[1], k=1)
+    return float(np.median(distance))
+
+
+def test_the_true_poses_make_the_lidars_agree_and_the_initial_ones_do_not(
+    truth_input: ReportInput,
+) -> None:
+    # After: about the point spacing of these sparse clouds (15 mm); before: a quarter metre.
+    assert object_distance_to_reference(truth_input, after=True) < 0.03
+    assert object_distance_to_reference(truth_input, after=False) > 0.1
+
+
+def test_the_map_frame_is_the_base_at_the_first_stop(
+    tiny: tuple[CalibrationProblem, Truth], truth_input: ReportInput
+) -> None:
+    problem, _ = tiny
+    for i, frame in enumerate(truth_input.frames):
+        np.testing.assert_allclose(
+            truth_input.T_W_lidar_before[i, 0], problem.lidar(frame).T_base_lidar, atol=1e-12
+        )
+    # The floor (z = 0 in the synthesiser's base_link) is where the truth puts it.
+    assert abs(floor_height(np.concatenate(truth_input.placed(after=True)))) < 0.01
+
+
+def test_the_adapter_places_the_result_consistently(
+    tiny: tuple[CalibrationProblem, Truth],
+) -> None:
+    """Whatever the calibration found: within each stop the LiDARs sit at the calibrated
+    extrinsics, and the reference moves between stops as the optimisation says."""
+    problem, _ = tiny
+    config = config_from_mapping(
+        {"optimisation": {"max_iterations": 3}, "denoise": {"enabled": False}}
+    )
+    result = calibrate(problem, config)
+    data = report_input(problem, result, max_points=4000)
+
+    assert data.frames == tuple(lidar.frame for lidar in result.lidars)
+    assert data.error_per_iteration == tuple(result.error_per_iteration)
+    T_base_ref = result.lidars[0].T_base_lidar_calibrated
+    after = data.T_W_lidar_after
+    np.testing.assert_allclose(after[0, 0], T_base_ref, atol=1e-9)
+    T_G_ref = result.optimisation.T_G_ref
+    for j in range(len(problem.stops)):
+        for i, lidar in enumerate(result.lidars):
+            np.testing.assert_allclose(
+                invert(after[0, j]) @ after[i, j],
+                invert(T_base_ref) @ lidar.T_base_lidar_calibrated,
+                atol=1e-9,
+            )
+            np.testing.assert_allclose(
+                data.T_W_lidar_before[i, j],
+                invert(problem.stops[0].T_odom_base)
+                @ problem.stops[j].T_odom_base
+                @ lidar.T_base_lidar_initial,
+                atol=1e-9,
+            )
+        np.testing.assert_allclose(
+            invert(after[0, 0]) @ after[0, j], invert(T_G_ref[0]) @ T_G_ref[j], atol=1e-9
+        )
+    # The same subset of each stop cloud for both maps, about max_points in all.
+    total = sum(len(cloud) for row in data.clouds for cloud in row)
+    assert 3000 <= total <= 4000
+
+    assert list(render(data, names=["error"])) == ["error"]
+
+
+@pytest.fixture(scope="module")
+def images(truth_input: ReportInput) -> dict[str, bytes]:
+    return render(truth_input)
+
+
+def decoded(data: bytes) -> np.ndarray:
+    image = Image.open(io.BytesIO(data))
+    assert image.format == "PNG"
+    return np.asarray(image.convert("RGB"), dtype=np.int16)
+
+
+def pixels_of(rgb: np.ndarray, colour: str) -> int:
+    """Pixels of `colour` blended over white (points are drawn translucent)."""
+    white = np.array([255.0, 255.0, 255.0])
+    direction = np.array([int(colour[k : k + 2], 16) for k in (1, 3, 5)]) - white
+    offset = rgb - white
+    alpha = offset @ direction / (direction @ direction)
+    residual = np.linalg.norm(offset - alpha[..., None] * direction, axis=2)
+    return int(((alpha > 0.3) & (alpha < 1.1) & (residual < 20)).sum())
+
+
+def test_every_image_is_a_png_of_a_readable_size(images: dict[str, bytes]) -> None:
+    assert list(images) == list(REPORT_IMAGES) == ["map-top", "map-side", "error"]
+    for name, data in images.items():
+        height, width, _ = decoded(data).shape
+        assert width >= 800 and height >= 400, name
+
+
+@pytest.mark.parametrize("name", ["map-top", "map-side"])
+def test_both_panels_show_each_lidar_in_its_own_colour(
+    images: dict[str, bytes], truth_input: ReportInput, name: str
+) -> None:
+    rgb = decoded(images[name])
+    height, width, _ = rgb.shape
+    # map-top: before | after side by side; map-side: before above after.
+    halves = (
+        (rgb[:, : width // 2], rgb[:, width // 2 :])
+        if name == "map-top"
+        else (rgb[: height // 2], rgb[height // 2 :])
+    )
+    for panel in halves:
+        for i in range(len(truth_input.frames)):
+            assert pixels_of(panel, lidar_colour(i)) > 200, (name, i)
+
+
+def test_no_iterations_still_renders(truth_input: ReportInput) -> None:
+    from dataclasses import replace
+
+    unknown = replace(truth_input, error_per_iteration=(), passed=None, converged=None)
+    assert decoded(render(unknown, names=["error"])["error"]).shape[1] >= 800
+
+
+def test_an_unknown_image_name_is_refused(truth_input: ReportInput) -> None:
+    with pytest.raises(ValueError, match=r"no report image \['map-3d'\]"):
+        render(truth_input, names=["map-3d"])
