@@ -10,6 +10,7 @@ import typer
 
 from pipeline import cli as pipeline_cli
 from service import cli as service_cli
+from workers import commands as worker_commands
 
 app = typer.Typer(
     name="fleetcal",
@@ -20,6 +21,7 @@ app = typer.Typer(
 )
 pipeline_cli.register(app)
 service_cli.register(app)
+worker_commands.register(app)
 
 
 @app.command()

@@ -1,6 +1,6 @@
-"""What a run's verdict depends on besides its recording, read from the database when the run is
-claimed: the robot's tolerance profile, and the poses its extrinsics are compared with (the last
-accepted calibration for a maintenance run, the model's design for an end-of-line run).
+"""What an attempt needs besides its recording, read from the database when the run is claimed:
+the robot's tolerance profile, and the poses its extrinsics are compared with (the last accepted
+calibration for a maintenance run, the model's design for an end-of-line run), all in a `JobSpec`.
 
 Plain, picklable records: the child process that runs the pipeline never touches the database.
 """
@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session
 
 from service import repository
 from service.models import LidarExtrinsic, Result, Robot, RunKind
+from service.settings import Settings
 from workers.queue import Claim
 
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float]]
@@ -41,6 +42,21 @@ class RunContext:
     limits: dict[str, float] = field(default_factory=dict)
     """The profile's `ToleranceLimits` that are set (`service.schemas.ToleranceLimits`)."""
     reference: Reference | None = None
+
+
+@dataclass(frozen=True)
+class JobSpec:
+    """Everything the child needs: the run, where its recording is, and its verdict context."""
+
+    run_id: str
+    attempt: int
+    robot_id: str
+    kind: str
+    storage_key: str
+    upload_format: str
+    config: dict[str, Any] | None
+    settings: Settings
+    context: RunContext = field(default_factory=RunContext)
 
 
 def load_context(session: Session, claim: Claim) -> RunContext:

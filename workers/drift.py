@@ -11,7 +11,15 @@ from typing import Any
 from pipeline.transforms import from_translation_xyzw, pose_difference
 from workers.context import Reference
 
-_KIND = {"last_accepted": "drift", "design": "deviation"}
+# Check names follow `pipeline.verdict` (`<what>:<frame>`); "deviation" there already means the
+# change from the initial extrinsics, hence "design" for the comparison with the design.
+_KIND = {"last_accepted": "drift", "design": "design"}
+
+
+_WHAT = {
+    "drift": "last accepted calibration (limit {limit} {unit}): has its mount moved or been hit?",
+    "design": "design pose (limit {limit} {unit}): is it mounted as the model says?",
+}
 
 
 def compare(document: dict[str, Any], reference: Reference) -> dict[str, Any]:
@@ -35,7 +43,14 @@ def compare(document: dict[str, Any], reference: Reference) -> dict[str, Any]:
             missing.append(frame)
             if limited:
                 checks.append(
-                    {"name": f"{kind}_{frame}", "value": None, "limit": None, "passed": False}
+                    {
+                        "name": f"{kind}_missing:{frame}",
+                        "value": None,
+                        "limit": None,
+                        "passed": False,
+                        "detail": f"{frame} is in the {reference.against.replace('_', ' ')} "
+                        "extrinsics but was not calibrated",
+                    }
                 )
             continue
         distance_m, angle_deg = pose_difference(
@@ -43,14 +58,22 @@ def compare(document: dict[str, Any], reference: Reference) -> dict[str, Any]:
             from_translation_xyzw(pose["translation"], pose["rotation_xyzw"]),
         )
         lidars[frame] = {"translation_m": distance_m, "rotation_deg": angle_deg}
-        for name, value, limit in (
-            (f"translation_{kind}_{frame}", distance_m, reference.max_translation_m),
-            (f"rotation_{kind}_{frame}", angle_deg, reference.max_rotation_deg),
+        for name, value, limit, unit in (
+            (f"{kind}_translation:{frame}", distance_m, reference.max_translation_m, "m"),
+            (f"{kind}_rotation:{frame}", angle_deg, reference.max_rotation_deg, "deg"),
         ):
-            if limit is not None:
-                checks.append(
-                    {"name": name, "value": value, "limit": limit, "passed": value <= limit}
-                )
+            if limit is None:
+                continue
+            passed = value <= limit
+            detail = (
+                ""
+                if passed
+                else f"{frame} is {value:.4g} {unit} away from its "
+                + _WHAT[kind].format(limit=limit, unit=unit)
+            )
+            checks.append(
+                {"name": name, "value": value, "limit": limit, "passed": passed, "detail": detail}
+            )
     verdict = dict(document.get("verdict", {}))
     verdict["checks"] = [*verdict.get("checks", []), *checks]
     verdict["passed"] = bool(verdict.get("passed", False)) and all(c["passed"] for c in checks)

@@ -39,7 +39,7 @@ def test_drift_within_limits_keeps_the_verdict() -> None:
     assert document["drift"]["against"] == "last_accepted"
     assert document["verdict"]["passed"] is True
     names = [check["name"] for check in document["verdict"]["checks"]]
-    assert {"translation_drift_lidar_rear", "rotation_drift_lidar_rear"} <= set(names)
+    assert {"drift_translation:lidar_rear", "drift_rotation:lidar_rear"} <= set(names)
 
 
 @pytest.mark.parametrize(("translation_m", "yaw_deg"), [(0.03, 0.0), (0.0, 2.0)])
@@ -48,7 +48,7 @@ def test_a_moved_mount_fails_the_run(translation_m: float, yaw_deg: float) -> No
     assert document["verdict"]["passed"] is False
     failed = [c["name"] for c in document["verdict"]["checks"] if not c["passed"]]
     expected = "translation" if translation_m else "rotation"
-    assert f"{expected}_drift_lidar_rear" in failed
+    assert f"drift_{expected}:lidar_rear" in failed
 
 
 def test_without_limits_drift_is_reported_but_not_judged() -> None:
@@ -67,6 +67,6 @@ def test_a_lidar_of_the_design_that_was_not_calibrated_fails_a_limited_check() -
     document = compare(result_document(passed=True), reference)
     assert document["drift"]["missing"] == ["lidar_left", "lidar_top"]
     assert document["verdict"]["passed"] is False
-    assert {"deviation_lidar_left", "deviation_lidar_top"} <= {
+    assert {"design_missing:lidar_left", "design_missing:lidar_top"} <= {
         c["name"] for c in document["verdict"]["checks"] if not c["passed"]
     }

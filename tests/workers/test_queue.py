@@ -16,7 +16,7 @@ from service.db import Database
 from service.models import Result, Run, RunStatus
 from service.settings import Settings
 from tests.service.documents import result_document
-from tests.workers.conftest import enqueue
+from tests.workers.runs import enqueue
 from workers import queue
 
 LEASE = timedelta(seconds=30)
