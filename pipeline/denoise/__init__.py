@@ -82,7 +82,7 @@ class DenoiseConfig(BaseModel):
         default=0.2, ge=0.0, le=1.0, description="pattern: |cos| beam vs local normal for edge-on"
     )
     cell_deg: float = Field(
-        default=5.0, gt=0.0, le=90.0, description="pattern: direction cell for the scan's spacing"
+        default=10.0, gt=0.0, le=90.0, description="pattern: direction cell for the scan's spacing"
     )
     floor_distance_m: float = Field(
         default=0.05, gt=0.0, description="RANSAC inlier distance of the floor fit (metres)"

@@ -1,0 +1,161 @@
+"""Stage 1 on the synthesiser's labelled clouds: how well each filter removes bleeding points.
+
+    .venv/bin/python -m tests.bench.bench_denoise [--scenes set1-box,set1-cylinder,set1-capsule]
+        [--seeds 10,11] [--stop-step 2] [--repeats 5]
+
+Clouds are the stop clouds `simulate_problem` gives the pipeline (every LiDAR, every
+`--stop-step`-th stop, full point rate). Positive = a removed point that is truly bleeding;
+precision, recall and F-score are pooled over a scene's clouds. Every method runs with the
+paper's parameters (`k = 20`, `C_s = 0.01`, `C_r = 3.0`); `pattern` adds its own defaults. The
+seeds differ from those `pattern`'s defaults were chosen on (0, 1). Prints markdown tables: scores
+per scene, the clean points removed near the observation centre (the paper's blind disc), and
+seconds per 100k points (wall and CPU, single-threaded; the load average is printed with it).
+"""
+
+from __future__ import annotations
+
+import os
+
+# Single-threaded numbers, as a worker process runs (DESIGN.md pins BLAS threads there too);
+# these must be set before numpy is imported.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from functools import partial  # noqa: E402
+
+import numpy as np  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
+
+from pipeline.denoise import (  # noqa: E402
+    DenoiseConfig,
+    DenoiseMethod,
+    denoise,
+    knn_mean_distances,
+    observation_centre,
+)
+from tests.pipeline.denoise.clouds import LabelledCloud, synth_stop_clouds  # noqa: E402
+
+DEFAULT_SCENES = ("set1-box", "set1-cylinder", "set1-capsule")
+CENTRE_DISC_M = 0.2
+
+
+@dataclass
+class Tally:
+    """Pooled counts of one method on one scene."""
+
+    true_pos: int = 0
+    false_pos: int = 0
+    false_neg: int = 0
+    clean_near_centre: int = 0
+    clean_near_centre_removed: int = 0
+
+    def add(self, keep: NDArray[np.bool_], cloud: LabelledCloud, near: NDArray[np.bool_]) -> None:
+        removed, bleeding = ~keep, cloud.is_bleeding
+        self.true_pos += int(np.count_nonzero(removed & bleeding))
+        self.false_pos += int(np.count_nonzero(removed & ~bleeding))
+        self.false_neg += int(np.count_nonzero(keep & bleeding))
+        self.clean_near_centre += int(np.count_nonzero(near & ~bleeding))
+        self.clean_near_centre_removed += int(np.count_nonzero(near & ~bleeding & removed))
+
+    def scores(self) -> tuple[float, float, float]:
+        precision = self.true_pos / max(self.true_pos + self.false_pos, 1)
+        recall = self.true_pos / max(self.true_pos + self.false_neg, 1)
+        f_score = 2 * self.true_pos / max(2 * self.true_pos + self.false_pos + self.false_neg, 1)
+        return precision, recall, f_score
+
+
+def score_scene(
+    scene: str, seeds: list[int], stop_step: int
+) -> tuple[dict[DenoiseMethod, Tally], int, int]:
+    tallies = {method: Tally() for method in DenoiseMethod}
+    points = bleeding = 0
+    for cloud in synth_stop_clouds(scene, seeds, stop_step):
+        points += len(cloud.points)
+        bleeding += int(cloud.is_bleeding.sum())
+        centre = observation_centre(cloud.points, cloud.optical_axis)
+        near = np.linalg.norm(cloud.points - centre, axis=1) < CENTRE_DISC_M
+        for method, tally in tallies.items():
+            result = denoise(cloud.points, DenoiseConfig(method=method), cloud.optical_axis)
+            tally.add(result.keep, cloud, near)
+    return tallies, points, bleeding
+
+
+def time_per_100k(cloud: LabelledCloud, repeats: int) -> list[tuple[str, float, float]]:
+    """(label, wall s, CPU s) per 100k points: medians over `repeats` runs."""
+    scale = 100_000 / len(cloud.points)
+    cases: list[tuple[str, Callable[[], object]]] = [
+        ("kNN only (k = 20)", partial(knn_mean_distances, cloud.points, 20))
+    ]
+    for method in DenoiseMethod:
+        config = DenoiseConfig(method=method)
+        cases.append((method.value, partial(denoise, cloud.points, config, cloud.optical_axis)))
+    rows = []
+    for label, action in cases:
+        walls, cpus = [], []
+        for _ in range(repeats):
+            wall, cpu = time.perf_counter(), time.process_time()
+            action()
+            walls.append(time.perf_counter() - wall)
+            cpus.append(time.process_time() - cpu)
+        rows.append((label, float(np.median(walls)) * scale, float(np.median(cpus)) * scale))
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--scenes", default=",".join(DEFAULT_SCENES))
+    parser.add_argument("--seeds", default="10,11")
+    parser.add_argument("--stop-step", type=int, default=2, help="use every n-th stop")
+    parser.add_argument("--repeats", type=int, default=5, help="timing runs per method")
+    args = parser.parse_args()
+    scenes = [s for s in args.scenes.split(",") if s]
+    seeds = [int(s) for s in args.seeds.split(",") if s]
+
+    results = {}
+    for scene in scenes:
+        results[scene] = score_scene(scene, seeds, args.stop_step)
+
+    methods = list(DenoiseMethod)
+    print(f"## Bleeding-point removal (seeds {seeds}, stops [::{args.stop_step}], all LiDARs)\n")
+    print(
+        "| scene | points | bleeding | "
+        + " | ".join(f"{m.value} P / R / F" for m in methods)
+        + " |"
+    )
+    print("|---|---:|---:|" + "---|" * len(methods))
+    for scene, (tallies, points, bleeding) in results.items():
+        cells = []
+        for method in methods:
+            precision, recall, f_score = tallies[method].scores()
+            cells.append(f"{precision:.3f} / {recall:.3f} / **{f_score:.3f}**")
+        print(f"| {scene} | {points} | {bleeding} | " + " | ".join(cells) + " |")
+
+    print(f"\n## Clean points removed within {CENTRE_DISC_M} m of the observation centre\n")
+    print("| scene | clean points there | " + " | ".join(m.value for m in methods) + " |")
+    print("|---|---:|" + "---:|" * len(methods))
+    for scene, (tallies, _, _) in results.items():
+        near = tallies[methods[0]].clean_near_centre
+        shares = [tallies[m].clean_near_centre_removed / max(near, 1) for m in methods]
+        print(f"| {scene} | {near} | " + " | ".join(f"{s:.1%}" for s in shares) + " |")
+
+    cloud = next(synth_stop_clouds(scenes[0], seeds[:1]))
+    rows = time_per_100k(cloud, args.repeats)
+    load = os.getloadavg()[0]
+    print(
+        f"\n## Seconds per 100k points ({len(cloud.points)}-point cloud, median of "
+        f"{args.repeats}; load average {load:.1f} on {os.cpu_count()} cores)\n"
+    )
+    print("| method | wall s | CPU s |")
+    print("|---|---:|---:|")
+    for label, wall, cpu in rows:
+        print(f"| {label} | {wall:.3f} | {cpu:.3f} |")
+
+
+if __name__ == "__main__":
+    main()
