@@ -27,7 +27,7 @@ from service.db import Database
 from service.settings import Settings
 from workers import queue
 from workers.context import JobSpec, load_context
-from workers.policy import Failure, FailureKind, RetryPolicy, decide
+from workers.policy import Failure, FailureKind, RetryPolicy, classify, decide
 from workers.pool import Broken, Done, Failed, Pool, PoolError, Slot, Stage, death_message
 from workers.queue import Claim
 
@@ -76,8 +76,6 @@ class Worker:
         self._stop_now = threading.Event()
         self._stopped = threading.Event()
         self._drain_deadline: float | None = None
-        self.finished = 0
-        """Attempts this worker brought to an end (any outcome); for tests and logs."""
 
     # -- control ----------------------------------------------------------------------------------
 
@@ -133,9 +131,10 @@ class Worker:
                         break
         finally:
             self._stopped.set()
-            for slot in pool.busy():
-                self._give_back(slot.job)
-            pool.close()
+            unfinished = self.held()
+            pool.close()  # kills the busy children first: nothing they send can count any more
+            for held in unfinished:
+                self._give_back(held)
             heartbeat.join(timeout=5)
             if self._own_db:
                 self.db.dispose()
@@ -161,15 +160,21 @@ class Worker:
         for slot in pool.idle():
             try:
                 held = queue.claim(self.db, self.id, self.lease)
-                if held is None:
-                    break
-                with self.db.session() as session:
-                    context = load_context(session, held)
             except SQLAlchemyError as err:
                 log.warning("claim: database unavailable (%s); will try again", _short(err))
                 break
+            if held is None:
+                break
             with self._lock:
                 self._held[held.run_id] = held
+            try:
+                with self.db.session() as session:
+                    context = load_context(session, held)
+            except Exception as err:
+                # A database outage, or a profile the worker cannot use: this attempt fails
+                # through the policy like any other, instead of taking the worker down.
+                self._end_attempt(held, classify(err, stage="claimed"))
+                continue
             spec = JobSpec(
                 run_id=str(held.run_id),
                 attempt=held.attempt,
@@ -321,7 +326,6 @@ class Worker:
         self._release(held)
 
     def _release(self, held: Claim) -> None:
-        self.finished += 1
         with self._lock:
             self._held.pop(held.run_id, None)
             self._lost.discard(held.run_id)
