@@ -138,7 +138,12 @@ class Database:
             return set(MigrationContext.configure(connection).get_current_heads())
 
     def head_revisions(self) -> set[str]:
-        return set(ScriptDirectory.from_config(self._alembic_config).get_heads())
+        return set(self._heads)
+
+    @cached_property
+    def _heads(self) -> frozenset[str]:
+        # The scripts do not change while the process runs; parse them once.
+        return frozenset(ScriptDirectory.from_config(self._alembic_config).get_heads())
 
     def migrations_current(self) -> bool:
         return self.current_revisions() == self.head_revisions()

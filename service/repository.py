@@ -154,11 +154,37 @@ class RunFilter:
     until: datetime | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
+class RunColumns:
+    """What a listing shows of a run: plain columns, no ORM object (listings stay cheap)."""
+
+    id: uuid.UUID
+    robot_id: str
+    kind: RunKind
+    status: RunStatus
+    attempts: int
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+
+
+@dataclass(frozen=True, slots=True)
 class RunRow:
-    run: Run
+    run: RunColumns
     passed: bool | None
     metric_error_final: float | None
+
+
+_RUN_COLUMNS = (
+    Run.id,
+    Run.robot_id,
+    Run.kind,
+    Run.status,
+    Run.attempts,
+    Run.created_at,
+    Run.started_at,
+    Run.finished_at,
+)
 
 
 def list_runs(
@@ -166,7 +192,7 @@ def list_runs(
 ) -> list[RunRow]:
     """Runs newest first, keyset-paged on (created_at, id): `after` is the last row seen."""
     stmt = (
-        select(Run, Result.passed, Result.metric_error_final)
+        select(*_RUN_COLUMNS, Result.passed, Result.metric_error_final)
         .outerjoin(Result, Result.run_id == Run.id)
         .order_by(Run.created_at.desc(), Run.id.desc())
         .limit(limit)
@@ -185,7 +211,16 @@ def list_runs(
         stmt = stmt.where(Run.created_at < where.until)
     if after is not None:
         stmt = stmt.where(tuple_(Run.created_at, Run.id) < tuple_(*after))
-    return [RunRow(run, passed, final) for run, passed, final in session.execute(stmt)]
+    return [
+        RunRow(
+            RunColumns(id_, robot_id, kind, status, attempts, created, started, finished),
+            passed,
+            final,
+        )
+        for id_, robot_id, kind, status, attempts, created, started, finished, passed, final in (
+            session.execute(stmt)
+        )
+    ]
 
 
 def latest_run(session: Session, robot_id: str) -> RunRow | None:
@@ -210,8 +245,10 @@ def store_result(
     try:
         json.dumps(document, allow_nan=False)
     except ValueError as err:
-        raise InvalidResultError("result document holds NaN or infinity; a failure must be a "
-                                 "failed check, never a non-finite number") from err
+        raise InvalidResultError(
+            "result document holds NaN or infinity; a failure must be a "
+            "failed check, never a non-finite number"
+        ) from err
     except TypeError as err:
         raise InvalidResultError(f"result document is not JSON: {err}") from err
     try:
@@ -310,14 +347,51 @@ def latest_calibration(session: Session, robot_id: str) -> Result | None:
     )
 
 
-def extrinsics_of(session: Session, run_id: uuid.UUID) -> list[LidarExtrinsic]:
-    return list(
-        session.scalars(
-            select(LidarExtrinsic)
-            .where(LidarExtrinsic.run_id == run_id)
-            .order_by(LidarExtrinsic.frame)
+@dataclass(frozen=True, slots=True)
+class ExtrinsicPoint:
+    """One LiDAR's calibrated `T_base_lidar` from one run (a history point)."""
+
+    id: int
+    run_id: uuid.UUID
+    frame: str
+    measured_at: datetime
+    passed: bool
+    is_reference: bool
+    translation: tuple[float, float, float]
+    rotation_xyzw: tuple[float, float, float, float]
+    stddev: dict[str, Any] | None
+
+
+_E = LidarExtrinsic
+_POINT_COLUMNS = (
+    _E.id,
+    _E.run_id,
+    _E.frame,
+    _E.measured_at,
+    _E.passed,
+    _E.is_reference,
+    _E.tx,
+    _E.ty,
+    _E.tz,
+    _E.qx,
+    _E.qy,
+    _E.qz,
+    _E.qw,
+    _E.stddev,
+)
+
+
+def _points(session: Session, stmt: Any) -> list[ExtrinsicPoint]:
+    return [
+        ExtrinsicPoint(id_, run_id, frame, at, passed, ref, (tx, ty, tz), (qx, qy, qz, qw), sd)
+        for id_, run_id, frame, at, passed, ref, tx, ty, tz, qx, qy, qz, qw, sd in session.execute(
+            stmt
         )
-    )
+    ]
+
+
+def extrinsics_of(session: Session, run_id: uuid.UUID) -> list[ExtrinsicPoint]:
+    return _points(session, select(*_POINT_COLUMNS).where(_E.run_id == run_id).order_by(_E.frame))
 
 
 def history(
@@ -330,10 +404,10 @@ def history(
     until: datetime | None,
     limit: int,
     after: tuple[datetime, int] | None,
-) -> list[LidarExtrinsic]:
+) -> list[ExtrinsicPoint]:
     """Per-LiDAR extrinsics oldest first, keyset-paged on (measured_at, id)."""
     stmt = (
-        select(LidarExtrinsic)
+        select(*_POINT_COLUMNS)
         .where(LidarExtrinsic.robot_id == robot_id)
         .order_by(LidarExtrinsic.measured_at, LidarExtrinsic.id)
         .limit(limit)
@@ -348,7 +422,7 @@ def history(
         stmt = stmt.where(LidarExtrinsic.measured_at < until)
     if after is not None:
         stmt = stmt.where(tuple_(LidarExtrinsic.measured_at, LidarExtrinsic.id) > tuple_(*after))
-    return list(session.scalars(stmt))
+    return _points(session, stmt)
 
 
 # -- tolerance profiles ---------------------------------------------------------------------------

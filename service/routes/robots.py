@@ -100,13 +100,13 @@ def get_calibration(
     if result is None:
         raise NoCalibration(f"robot {robot_id!r} has no passed calibration yet")
     lidars = {
-        row.frame: LidarCalibration(
-            translation=(row.tx, row.ty, row.tz),
-            rotation_xyzw=(row.qx, row.qy, row.qz, row.qw),
-            is_reference=row.is_reference,
-            stddev=row.stddev,
+        point.frame: LidarCalibration(
+            translation=point.translation,
+            rotation_xyzw=point.rotation_xyzw,
+            is_reference=point.is_reference,
+            stddev=point.stddev,
         )
-        for row in repository.extrinsics_of(session, result.run_id)
+        for point in repository.extrinsics_of(session, result.run_id)
     }
     return CalibrationPublic(
         robot_id=robot_id,
@@ -151,16 +151,16 @@ def get_history(
     )
     items = [
         HistoryPoint(
-            run_id=row.run_id,
-            frame=row.frame,
-            measured_at=row.measured_at,
-            passed=row.passed,
-            is_reference=row.is_reference,
-            translation=(row.tx, row.ty, row.tz),
-            rotation_xyzw=(row.qx, row.qy, row.qz, row.qw),
-            stddev=row.stddev,
+            run_id=point.run_id,
+            frame=point.frame,
+            measured_at=point.measured_at,
+            passed=point.passed,
+            is_reference=point.is_reference,
+            translation=point.translation,
+            rotation_xyzw=point.rotation_xyzw,
+            stddev=point.stddev,
         )
-        for row in rows[:limit]
+        for point in rows[:limit]
     ]
     next_cursor = None
     if len(rows) > limit:

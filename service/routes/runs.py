@@ -208,7 +208,9 @@ def list_runs(
 # -- helpers ------------------------------------------------------------------------------------
 
 
-def run_summary(run: Run, passed: bool | None, metric_error_final: float | None) -> RunSummary:
+def run_summary(
+    run: Run | repository.RunColumns, passed: bool | None, metric_error_final: float | None
+) -> RunSummary:
     return RunSummary(
         id=run.id,
         robot_id=run.robot_id,

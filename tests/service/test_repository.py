@@ -108,8 +108,8 @@ def test_store_result_writes_result_extrinsics_and_status_together(db: Database)
     assert [row.frame for row in rows] == ["lidar_front", "lidar_rear"]
     front, rear = rows
     assert front.is_reference and not rear.is_reference
-    assert (rear.tx, rear.ty, rear.tz) == (-0.41, 0.004, 0.618)
-    assert (rear.qx, rear.qy, rear.qz, rear.qw) == (0.0012, -0.0008, 0.9999985, 0.0009)
+    assert rear.translation == (-0.41, 0.004, 0.618)
+    assert rear.rotation_xyzw == (0.0012, -0.0008, 0.9999985, 0.0009)
     assert rear.stddev == document["lidars"]["lidar_rear"]["stddev"]
     assert all(row.passed and row.measured_at == run.created_at for row in rows)
 
