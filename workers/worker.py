@@ -34,6 +34,7 @@ from workers.queue import Claim
 log = logging.getLogger(__name__)
 
 CALIBRATE_JOB = "workers.job:calibrate_run"
+MAX_CLAIM_PAUSE = timedelta(seconds=30)
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,8 @@ class Worker:
         self._stop_now = threading.Event()
         self._stopped = threading.Event()
         self._drain_deadline: float | None = None
+        self._outages = 0
+        self._claims_paused_until = 0.0
 
     # -- control ----------------------------------------------------------------------------------
 
@@ -157,12 +160,24 @@ class Worker:
     def _fill(self, pool: Pool) -> bool:
         """Claim runs for idle slots; True if any was claimed."""
         claimed = False
+        if time.monotonic() < self._claims_paused_until:
+            return False
         for slot in pool.idle():
             try:
                 held = queue.claim(self.db, self.id, self.lease)
             except SQLAlchemyError as err:
-                log.warning("claim: database unavailable (%s); will try again", _short(err))
+                # The database is down or refusing: back off as the policy does for runs,
+                # rather than hammering it (and the log) at every poll.
+                self._outages += 1
+                pause = min(self.options.retry.backoff(self._outages), MAX_CLAIM_PAUSE)
+                self._claims_paused_until = time.monotonic() + pause.total_seconds()
+                log.warning(
+                    "claim: database unavailable (%s); next try in %.1f s",
+                    _short(err),
+                    pause.total_seconds(),
+                )
                 break
+            self._outages = 0
             if held is None:
                 break
             with self._lock:

@@ -4,11 +4,14 @@ so that each outcome (success, bad input, crashes, slow runs, stop requests) is 
 from __future__ import annotations
 
 import contextlib
+import logging
+import socket
 import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator
 from datetime import timedelta
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -189,3 +192,21 @@ def test_a_job_that_cannot_load_stops_the_worker_and_returns_the_run(
         worker.run()
     row = run_row(db, run_id)
     assert row.status == RunStatus.QUEUED and row.attempts == 0
+
+
+def test_a_worker_waits_out_an_unreachable_database(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Nothing listens on the port: claims fail, the worker backs off and keeps going."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        closed_port = probe.getsockname()[1]
+    settings = Settings(
+        database_url=f"postgresql+psycopg://nobody@127.0.0.1:{closed_port}/none",
+        storage_url=(tmp_path / "storage").as_uri(),
+    )
+    with caplog.at_level(logging.WARNING, logger="workers.worker"), running_worker(settings):
+        wait_for(
+            "two failed claims, each followed by a pause",
+            lambda: sum("next try in" in r.message for r in caplog.records) >= 2,
+        )
