@@ -14,6 +14,7 @@ from typing import Any
 
 from pydantic import ValidationError
 from sqlalchemy import func, select, tuple_, update
+from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session
 
 from service.models import (
@@ -74,6 +75,18 @@ def put_robot(
     return robot, created
 
 
+def _insert_robot_if_absent(session: Session, robot_id: str) -> None:
+    """Two first uploads of a new robot may race (PostgreSQL): the second must not fail."""
+    dialect = session.get_bind().dialect.name
+    insert_: Any = {"postgresql": postgresql.insert, "sqlite": sqlite.insert}[dialect]
+    now = datetime.now(UTC)
+    session.execute(
+        insert_(Robot)
+        .values(id=robot_id, meta={}, created_at=now, updated_at=now)
+        .on_conflict_do_nothing(index_elements=[Robot.id])
+    )
+
+
 def list_robots(session: Session, *, limit: int, after_id: str | None) -> list[Robot]:
     stmt = select(Robot).order_by(Robot.id).limit(limit)
     if after_id is not None:
@@ -112,8 +125,7 @@ def record_upload(session: Session, upload: NewUpload, *, create_robot: bool) ->
     if session.get(Robot, upload.robot_id) is None:
         if not create_robot:
             raise UnknownRobotError(upload.robot_id)
-        session.add(Robot(id=upload.robot_id, meta={}))
-        session.flush()
+        _insert_robot_if_absent(session, upload.robot_id)
     now = datetime.now(UTC)
     run = Run(
         id=upload.run_id,

@@ -4,6 +4,7 @@ transaction; tolerance profiles resolve per robot model; runs record and list as
 from __future__ import annotations
 
 import math
+import threading
 import uuid
 from collections.abc import Iterator
 from datetime import UTC, datetime
@@ -69,6 +70,50 @@ def test_record_upload_queues_the_run_and_creates_the_robot(db: Database) -> Non
         assert run.attempts == 0 and run.max_attempts == 3
         assert run.available_at == run.created_at
         assert session.get(Robot, "R1") is not None
+
+
+def test_two_first_uploads_of_a_new_robot_both_succeed(db: Database) -> None:
+    # The first transaction has inserted the robot but not committed when the second starts;
+    # the second waits on it (PostgreSQL row lock, SQLite write lock) and must not fail.
+    first = db.write_session()
+    first.begin()
+    repository.record_upload(first, _upload("R5"), create_robot=True)
+    outcome: list[object] = []
+    second = threading.Thread(target=lambda: outcome.append(_record_or_error(db, "R5")))
+    second.start()
+    second.join(0.5)
+    first.commit()
+    first.close()
+    second.join(10)
+    assert outcome == ["ok"]
+    with db.session() as session:
+        assert session.scalar(select(func.count()).select_from(Run)) == 2
+        assert session.scalar(select(func.count()).select_from(Robot)) == 1
+
+
+def _upload(robot_id: str) -> repository.NewUpload:
+    run_id = uuid.uuid4()
+    return repository.NewUpload(
+        run_id=run_id,
+        robot_id=robot_id,
+        kind=RunKind.END_OF_LINE,
+        size=1,
+        sha256="0" * 64,
+        format="mcap",
+        storage_key=f"recordings/{robot_id}/{run_id}",
+        idempotency_key=None,
+        config=None,
+        max_attempts=3,
+    )
+
+
+def _record_or_error(db: Database, robot_id: str) -> object:
+    try:
+        with db.transaction() as session:
+            repository.record_upload(session, _upload(robot_id), create_robot=True)
+    except Exception as err:  # the test reports what went wrong instead of hanging
+        return err
+    return "ok"
 
 
 def test_record_upload_without_robot_creation_refuses_unknown_robots(db: Database) -> None:
