@@ -12,11 +12,12 @@ from anyio import to_thread
 from fastapi import FastAPI
 
 from pipeline import __version__
+from service.dashboard import router as dashboard_router
 from service.db import Database
 from service.deps import Services
 from service.metrics import Metrics, MetricsMiddleware
 from service.problems import install_problem_handlers
-from service.routes import health, robots, runs, tolerance
+from service.routes import exports, fleet, health, reports, robots, runs, tolerance
 from service.settings import Settings
 from service.storage import make_storage
 
@@ -48,8 +49,9 @@ def create_app(settings: Settings) -> FastAPI:
     install_problem_handlers(app)
     app.add_middleware(MetricsMiddleware, metrics=metrics)
     # Each router carries its full prefix (/v1/...), so route templates in metrics are complete.
-    for module in (health, runs, robots, tolerance):
+    for module in (health, runs, robots, tolerance, fleet, reports, exports):
         app.include_router(module.router)
+    app.include_router(dashboard_router)
     return app
 
 

@@ -1,0 +1,53 @@
+"""The dashboard at `/`: one HTML page and its script and style, no build step. The page asks for
+an API key once, keeps it in the browser's session storage and calls the `/v1` API with it; the
+server holds no dashboard state and sets no cookie.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from importlib import resources
+
+from fastapi import APIRouter
+from fastapi.responses import Response
+
+from service.problems import NotFound
+
+router = APIRouter(include_in_schema=False)
+
+_ASSETS = {
+    "dashboard.js": "text/javascript; charset=utf-8",
+    "dashboard.css": "text/css; charset=utf-8",
+}
+# Everything comes from this origin; images are blob: URLs the script makes from API responses.
+_SECURITY_HEADERS = {
+    "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; "
+    "object-src 'none'; base-uri 'none'; frame-ancestors 'none'; form-action 'self'",
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+}
+
+
+@cache
+def _asset(name: str) -> bytes:
+    return resources.files(__package__).joinpath(name).read_bytes()
+
+
+@router.get("/")
+def index() -> Response:
+    return Response(
+        _asset("index.html"),
+        media_type="text/html; charset=utf-8",
+        headers={**_SECURITY_HEADERS, "Cache-Control": "no-cache"},
+    )
+
+
+@router.get("/dashboard/{name}")
+def asset(name: str) -> Response:
+    if name not in _ASSETS:
+        raise NotFound(f"no dashboard file {name!r}")
+    return Response(
+        _asset(name),
+        media_type=_ASSETS[name],
+        headers={**_SECURITY_HEADERS, "Cache-Control": "no-cache"},
+    )

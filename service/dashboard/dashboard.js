@@ -1,0 +1,799 @@
+// fleetcal dashboard: a small client of the /v1 API, no build step and no dependencies.
+// Pages (hash routes): #/ fleet overview, #/robots/<id> one robot's history, #/runs/<id> one run.
+"use strict";
+
+(() => {
+  const KEY_STORAGE = "fleetcal.apiKey";
+  // The report images' colours (pipeline.report.LIDAR_COLOURS): LiDAR i, the reference first.
+  const COLOURS = ["#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442"];
+  const AXIS_COLOURS = ["#D55E00", "#009E73", "#0072B2"]; // x, y, z
+  const POLL_MS = 1000;
+  const app = document.getElementById("app");
+  const crumbs = document.getElementById("crumbs");
+  const forgetButton = document.getElementById("forget-key");
+  let generation = 0; // bumped on every navigation: stale loads and polls stop drawing
+  let blobUrls = [];
+
+  // -- DOM helpers ------------------------------------------------------------------------------
+
+  function h(tag, attrs, ...children) {
+    const node = document.createElement(tag);
+    setAttributes(node, attrs);
+    node.append(...children.flat().filter((c) => c !== null && c !== undefined && c !== false).map(asNode));
+    return node;
+  }
+
+  const SVG_NS = "http://www.w3.org/2000/svg";
+  function s(tag, attrs, ...children) {
+    const node = document.createElementNS(SVG_NS, tag);
+    setAttributes(node, attrs);
+    node.append(...children.flat().filter((c) => c !== null && c !== undefined && c !== false).map(asNode));
+    return node;
+  }
+
+  function setAttributes(node, attrs) {
+    for (const [name, value] of Object.entries(attrs || {})) {
+      if (value === null || value === undefined || value === false) continue;
+      if (name.startsWith("on")) node.addEventListener(name.slice(2), value);
+      else if (name === "dataset") Object.assign(node.dataset, value);
+      else node.setAttribute(name, value === true ? "" : String(value));
+    }
+  }
+
+  function asNode(child) {
+    return child instanceof Node ? child : document.createTextNode(String(child));
+  }
+
+  function show(...nodes) {
+    app.replaceChildren(...nodes);
+  }
+
+  function setCrumbs(...items) {
+    const parts = [h("a", { href: "#/" }, "Fleet")];
+    for (const [label, href] of items) parts.push(" / ", href ? h("a", { href }, label) : h("span", {}, label));
+    crumbs.replaceChildren(...parts);
+  }
+
+  // -- API --------------------------------------------------------------------------------------
+
+  class ApiError extends Error {
+    constructor(status, problem) {
+      super(problem.detail || problem.title || `HTTP ${status}`);
+      this.status = status;
+      this.problem = problem;
+    }
+  }
+
+  async function request(path) {
+    const key = sessionStorage.getItem(KEY_STORAGE);
+    const response = await fetch(path, { headers: { "X-API-Key": key || "" } });
+    if (!response.ok) {
+      let problem;
+      try {
+        problem = await response.json();
+      } catch {
+        problem = { title: response.statusText, detail: "" };
+      }
+      if (response.status === 401) sessionStorage.removeItem(KEY_STORAGE);
+      throw new ApiError(response.status, problem);
+    }
+    return response;
+  }
+
+  async function api(path) {
+    return (await request(path)).json();
+  }
+
+  async function blobUrl(path) {
+    const url = URL.createObjectURL(await (await request(path)).blob());
+    blobUrls.push(url);
+    return url;
+  }
+
+  async function download(path, fallbackName) {
+    const response = await request(path);
+    const disposition = response.headers.get("Content-Disposition") || "";
+    const match = disposition.match(/filename="?([^";]+)"?/);
+    const url = URL.createObjectURL(await response.blob());
+    const link = h("a", { href: url, download: match ? match[1] : fallbackName, hidden: true });
+    document.body.append(link);
+    link.click();
+    link.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 60_000);
+  }
+
+  function qs(params) {
+    const query = new URLSearchParams();
+    for (const [k, v] of Object.entries(params)) if (v !== null && v !== undefined) query.set(k, v);
+    const text = query.toString();
+    return text ? `?${text}` : "";
+  }
+
+  // -- formatting -------------------------------------------------------------------------------
+
+  function mm(metres) {
+    return metres === null || metres === undefined || !Number.isFinite(metres) ? "–" : `${(metres * 1000).toFixed(1)} mm`;
+  }
+
+  function deg(value, digits = 3) {
+    return value === null || value === undefined || !Number.isFinite(value) ? "–" : `${value.toFixed(digits)}°`;
+  }
+
+  function num(value, digits = 4) {
+    return value === null || value === undefined || !Number.isFinite(value) ? "–" : value.toFixed(digits);
+  }
+
+  function ago(iso) {
+    if (!iso) return "–";
+    const seconds = (Date.now() - new Date(iso).getTime()) / 1000;
+    const steps = [
+      [60, "s", 1],
+      [3600, "min", 60],
+      [86400, "h", 3600],
+      [86400 * 60, "d", 86400],
+    ];
+    for (const [limit, unit, size] of steps) if (seconds < limit) return `${Math.max(0, Math.floor(seconds / size))} ${unit} ago`;
+    return new Date(iso).toLocaleDateString();
+  }
+
+  function when(iso) {
+    return iso ? h("time", { datetime: iso, title: new Date(iso).toLocaleString() }, ago(iso)) : "–";
+  }
+
+  function shortId(id) {
+    return id.slice(0, 8);
+  }
+
+  function statusBadge(status) {
+    return h("span", { class: `badge status-${status}`, dataset: { status } }, status);
+  }
+
+  function verdictBadge(passed) {
+    if (passed === null || passed === undefined) return h("span", { class: "badge verdict-none" }, "no verdict");
+    return h("span", { class: `badge ${passed ? "pass" : "fail"}`, dataset: { verdict: passed ? "passed" : "failed" } }, passed ? "PASSED" : "FAILED");
+  }
+
+  function swatch(colour) {
+    const node = h("span", { class: "swatch" });
+    node.style.background = colour;
+    return node;
+  }
+
+  // -- geometry (quaternions [x, y, z, w]) ---------------------------------------------------------
+
+  function rpyDeg([x, y, z, w]) {
+    const roll = Math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y));
+    const pitch = Math.asin(Math.max(-1, Math.min(1, 2 * (w * y - z * x))));
+    const yaw = Math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z));
+    return [roll, pitch, yaw].map((a) => (a * 180) / Math.PI);
+  }
+
+  // Rotation vector (deg, about the LiDAR's own axes) of q0^-1 q1: the change from q0 to q1.
+  function rotationChangeDeg(q0, q1) {
+    const [ax, ay, az, aw] = [-q0[0], -q0[1], -q0[2], q0[3]];
+    const [bx, by, bz, bw] = q1;
+    let x = aw * bx + ax * bw + ay * bz - az * by;
+    let y = aw * by - ax * bz + ay * bw + az * bx;
+    let z = aw * bz + ax * by - ay * bx + az * bw;
+    let w = aw * bw - ax * bx - ay * by - az * bz;
+    if (w < 0) [x, y, z, w] = [-x, -y, -z, -w];
+    const norm = Math.hypot(x, y, z);
+    if (norm < 1e-15) return [0, 0, 0];
+    const angle = (2 * Math.atan2(norm, w) * 180) / Math.PI;
+    return [x, y, z].map((c) => (c / norm) * angle);
+  }
+
+  // -- charts (inline SVG) ----------------------------------------------------------------------
+
+  function niceTicks(lo, hi, count = 5) {
+    const span = hi - lo || Math.abs(hi) || 1;
+    const raw = span / count;
+    const power = 10 ** Math.floor(Math.log10(raw));
+    const step = [1, 2, 5, 10].map((m) => m * power).find((v) => v >= raw) || 10 * power;
+    const ticks = [];
+    for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) ticks.push(Number(v.toPrecision(12)));
+    return ticks;
+  }
+
+  // series: [{label, colour, points: [{t: Date, v, passed, runId}]}]; band: {lo, hi, label} or null.
+  function timeChart({ id, title, unit, series, band, note }) {
+    const W = 640, H = 230, L = 60, R = 14, T = 12, B = 34;
+    const points = series.flatMap((x) => x.points);
+    const times = points.map((p) => p.t.getTime());
+    let t0 = Math.min(...times), t1 = Math.max(...times);
+    if (t0 === t1) [t0, t1] = [t0 - 3600e3, t1 + 3600e3];
+    const values = points.map((p) => p.v).concat(band ? [band.lo, band.hi] : []);
+    let v0 = Math.min(...values), v1 = Math.max(...values);
+    const pad = (v1 - v0) * 0.12 || Math.abs(v1) * 0.2 || 1;
+    v0 -= pad;
+    v1 += pad;
+    const x = (t) => L + ((t - t0) / (t1 - t0)) * (W - L - R);
+    const y = (v) => T + (1 - (v - v0) / (v1 - v0)) * (H - T - B);
+    const svg = s("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart", role: "img", "aria-label": title, dataset: { points: points.length } });
+    if (band) {
+      svg.append(
+        s("rect", { class: "band", x: L, y: y(band.hi), width: W - L - R, height: Math.max(0, y(band.lo) - y(band.hi)) }),
+        s("line", { class: "band-edge", x1: L, x2: W - R, y1: y(band.hi), y2: y(band.hi) }),
+        s("line", { class: "band-edge", x1: L, x2: W - R, y1: y(band.lo), y2: y(band.lo) }),
+        s("text", { class: "band-label", x: W - R - 4, y: y(band.hi) - 4, "text-anchor": "end" }, band.label),
+      );
+    }
+    for (const v of niceTicks(v0, v1)) {
+      svg.append(
+        s("line", { class: "grid", x1: L, x2: W - R, y1: y(v), y2: y(v) }),
+        s("text", { class: "tick", x: L - 6, y: y(v) + 4, "text-anchor": "end" }, `${v}`),
+      );
+    }
+    const tickCount = Math.min(5, new Set(times).size + 1);
+    for (let k = 0; k <= tickCount; k++) {
+      const t = t0 + ((t1 - t0) * k) / tickCount;
+      const date = new Date(t);
+      const label = t1 - t0 < 2 * 86400e3 ? date.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" }) : date.toLocaleDateString();
+      const anchor = k === 0 ? "start" : k === tickCount ? "end" : "middle";
+      svg.append(s("text", { class: "tick", x: x(t), y: H - B + 16, "text-anchor": anchor }, label));
+    }
+    svg.append(
+      s("line", { class: "axis", x1: L, x2: L, y1: T, y2: H - B }),
+      s("line", { class: "axis", x1: L, x2: W - R, y1: H - B, y2: H - B }),
+      s("text", { class: "unit", x: 12, y: T + (H - T - B) / 2, transform: `rotate(-90 12 ${T + (H - T - B) / 2})`, "text-anchor": "middle" }, unit),
+    );
+    for (const line of series) {
+      const sorted = [...line.points].sort((a, b) => a.t - b.t);
+      if (sorted.length > 1) {
+        svg.append(s("polyline", { class: "series", points: sorted.map((p) => `${x(p.t.getTime())},${y(p.v)}`).join(" "), stroke: line.colour }));
+      }
+      for (const p of sorted) {
+        const dot = s(
+          "circle",
+          { class: `dot ${p.passed ? "passed" : "failed"}`, cx: x(p.t.getTime()), cy: y(p.v), r: 4, stroke: line.colour, fill: p.passed ? line.colour : "#fff", onclick: () => (location.hash = `#/runs/${p.runId}`) },
+          s("title", {}, `${line.label}: ${p.v.toFixed(3)} ${unit}\n${p.t.toLocaleString()} — ${p.passed ? "passed" : "failed"} run ${shortId(p.runId)}`),
+        );
+        svg.append(dot);
+      }
+    }
+    const legend = h("div", { class: "legend" }, series.map((line) => h("span", {}, swatch(line.colour), line.label)), h("span", { class: "muted" }, "● passed run  ○ failed run"));
+    return h("figure", { class: "chart-box", id }, h("figcaption", {}, title), legend, svg, note ? h("p", { class: "muted small" }, note) : null);
+  }
+
+  function stageChart(stages) {
+    const entries = Object.entries(stages || {}).filter(([, v]) => v && Number.isFinite(v.seconds));
+    if (!entries.length) return h("p", { class: "muted" }, "No stage timings.");
+    const W = 640, row = 22, L = 130, R = 70;
+    const H = entries.length * row + 8;
+    const longest = Math.max(...entries.map(([, v]) => v.seconds)) || 1;
+    const svg = s("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart stages", role: "img", "aria-label": "stage timings" });
+    entries.forEach(([name, value], k) => {
+      const yy = 4 + k * row;
+      const width = Math.max(1, (value.seconds / longest) * (W - L - R));
+      svg.append(
+        s("text", { class: "tick", x: L - 8, y: yy + 14, "text-anchor": "end" }, name),
+        s("rect", { class: "bar", x: L, y: yy + 3, width, height: row - 8 }),
+        s("text", { class: "tick", x: L + width + 6, y: yy + 14 }, `${value.seconds.toFixed(2)} s`),
+      );
+    });
+    const total = entries.reduce((sum, [, v]) => sum + v.seconds, 0);
+    return h("figure", { class: "chart-box" }, h("figcaption", {}, `Stage timings (total ${total.toFixed(1)} s)`), svg);
+  }
+
+  // -- pages ------------------------------------------------------------------------------------
+
+  function keyForm(message) {
+    setCrumbs();
+    forgetButton.hidden = true;
+    const input = h("input", { id: "api-key", type: "password", autocomplete: "off", required: true, placeholder: "fck_…", size: 60 });
+    const error = h("p", { class: "error", id: "key-error" }, message || "");
+    const form = h(
+      "form",
+      {
+        id: "key-form",
+        onsubmit: async (event) => {
+          event.preventDefault();
+          sessionStorage.setItem(KEY_STORAGE, input.value.trim());
+          try {
+            await api("/v1/fleet?limit=1");
+            route();
+          } catch (err) {
+            sessionStorage.removeItem(KEY_STORAGE);
+            error.textContent = err.status === 403 ? "This key may not read the fleet: use a key with the read scope." : `The key was refused: ${err.message}`;
+          }
+        },
+      },
+      h("label", { for: "api-key" }, "API key"),
+      input,
+      h("button", { type: "submit" }, "Open the dashboard"),
+    );
+    show(
+      h(
+        "section",
+        { class: "card narrow" },
+        h("h1", {}, "fleetcal dashboard"),
+        h("p", {}, "Enter an API key with the read scope (", h("code", {}, "fleetcal keys create --scope read"), ", or the admin key ", h("code", {}, "fleetcal serve"), " printed on its first start). It is kept in this browser tab's session only."),
+        form,
+        error,
+      ),
+    );
+    input.focus();
+  }
+
+  async function overviewPage(my) {
+    setCrumbs();
+    const [fleet, recent] = await Promise.all([api("/v1/fleet?limit=200"), api("/v1/runs?limit=10")]);
+    if (my !== generation) return;
+    const robots = fleet.items;
+    const latest = robots.map((r) => r.latest_run).filter(Boolean);
+    const count = (f) => latest.filter(f).length;
+    const tiles = h(
+      "div",
+      { class: "tiles" },
+      tile("Robots", robots.length),
+      tile("Latest run passed", count((r) => r.passed === true), "pass"),
+      tile("Latest run failed", count((r) => r.status === "failed" || r.passed === false), "fail"),
+      tile("In progress", count((r) => r.status === "queued" || r.status === "running")),
+    );
+    const rows = robots.map((robot) => {
+      const run = robot.latest_run;
+      return h(
+        "tr",
+        { dataset: { robotId: robot.id } },
+        h("td", {}, h("a", { href: `#/robots/${encodeURIComponent(robot.id)}`, class: "robot-link" }, robot.id)),
+        h("td", {}, robot.model || h("span", { class: "muted" }, "–")),
+        h("td", {}, run ? [h("a", { href: `#/runs/${run.id}` }, `${run.kind.replaceAll("_", " ")} ${shortId(run.id)}`), " ", statusBadge(run.status)] : h("span", { class: "muted" }, "no run yet")),
+        h("td", {}, run ? verdictBadge(run.passed) : "–"),
+        h("td", { class: "num" }, run ? mm(run.metric_error_final) : "–"),
+        h("td", {}, run ? when(run.created_at) : "–"),
+        h("td", {}, robot.latest_calibration ? [h("a", { href: `#/runs/${robot.latest_calibration.run_id}` }, "accepted"), " ", when(robot.latest_calibration.measured_at)] : h("span", { class: "muted" }, "none yet")),
+      );
+    });
+    const table = robots.length
+      ? h("table", { id: "fleet" }, h("thead", {}, h("tr", {}, ["Robot", "Model", "Latest run", "Verdict", "Metric error", "Uploaded", "Calibration in use"].map((t) => h("th", {}, t)))), h("tbody", {}, rows))
+      : h("p", { class: "muted", id: "fleet-empty" }, "No robots yet. A robot appears when it uploads its first recording (POST /v1/robots/{id}/runs), e.g. with `fleetcal demo`.");
+    show(
+      h("h1", {}, "Fleet"),
+      tiles,
+      h("section", { class: "card" }, h("h2", {}, "Robots"), table, fleet.next_cursor ? h("p", { class: "muted" }, "Showing the first 200 robots.") : null),
+      h("section", { class: "card" }, h("h2", {}, "Recent runs"), runTable(recent.items, true)),
+    );
+  }
+
+  function tile(label, value, kind) {
+    return h("div", { class: `tile ${kind || ""}` }, h("div", { class: "tile-value" }, value), h("div", { class: "tile-label" }, label));
+  }
+
+  function runTable(runs, withRobot) {
+    if (!runs.length) return h("p", { class: "muted" }, "No runs yet.");
+    const head = ["Run", withRobot ? "Robot" : null, "Kind", "Status", "Verdict", "Metric error", "Uploaded", "Took"].filter(Boolean);
+    return h(
+      "table",
+      { class: "runs" },
+      h("thead", {}, h("tr", {}, head.map((t) => h("th", {}, t)))),
+      h(
+        "tbody",
+        {},
+        runs.map((run) =>
+          h(
+            "tr",
+            { dataset: { runId: run.id } },
+            h("td", {}, h("a", { href: `#/runs/${run.id}` }, shortId(run.id))),
+            withRobot ? h("td", {}, h("a", { href: `#/robots/${encodeURIComponent(run.robot_id)}` }, run.robot_id)) : null,
+            h("td", {}, run.kind.replaceAll("_", " ")),
+            h("td", {}, statusBadge(run.status)),
+            h("td", {}, verdictBadge(run.passed)),
+            h("td", { class: "num" }, mm(run.metric_error_final)),
+            h("td", {}, when(run.created_at)),
+            h("td", { class: "num" }, run.started_at && run.finished_at ? `${((new Date(run.finished_at) - new Date(run.started_at)) / 1000).toFixed(1)} s` : "–"),
+          ),
+        ),
+      ),
+    );
+  }
+
+  async function allHistory(robotId) {
+    const items = [];
+    let cursor = null;
+    do {
+      const page = await api(`/v1/robots/${encodeURIComponent(robotId)}/history${qs({ limit: 10000, cursor })}`);
+      items.push(...page.items);
+      cursor = page.next_cursor;
+    } while (cursor);
+    return items;
+  }
+
+  async function robotPage(robotId, my) {
+    setCrumbs([robotId, null]);
+    const path = `/v1/robots/${encodeURIComponent(robotId)}`;
+    const [robot, history, runs] = await Promise.all([api(path), allHistory(robotId), api(`/v1/runs${qs({ robot_id: robotId, limit: 25 })}`)]);
+    let limits = {};
+    if (robot.tolerance_profile) {
+      try {
+        limits = (await api(`/v1/tolerance-profiles/${encodeURIComponent(robot.tolerance_profile)}`)).limits || {};
+      } catch {
+        limits = {};
+      }
+    }
+    if (my !== generation) return;
+    const frames = [...new Set(history.map((p) => p.frame))].sort((a, b) => {
+      const ra = history.find((p) => p.frame === a).is_reference, rb = history.find((p) => p.frame === b).is_reference;
+      return ra === rb ? a.localeCompare(b) : ra ? -1 : 1;
+    });
+    const runsBody = h("div", {}, runTable(runs.items, false));
+    let cursor = runs.next_cursor;
+    const more = h("button", {
+      type: "button",
+      hidden: !cursor,
+      onclick: async () => {
+        const page = await api(`/v1/runs${qs({ robot_id: robotId, limit: 25, cursor })}`);
+        cursor = page.next_cursor;
+        more.hidden = !cursor;
+        runsBody.append(runTable(page.items, false));
+      },
+    }, "Load older runs");
+    const accepted = history.filter((p) => p.passed).at(-1);
+    show(
+      h("h1", {}, `Robot ${robot.id}`),
+      h(
+        "dl",
+        { class: "facts" },
+        fact("Model", robot.model || "–"),
+        fact("Tolerance profile", robot.tolerance_profile || "none"),
+        fact("Latest run", robot.latest_run ? [h("a", { href: `#/runs/${robot.latest_run.id}` }, shortId(robot.latest_run.id)), " ", statusBadge(robot.latest_run.status), " ", verdictBadge(robot.latest_run.passed)] : "none"),
+        fact("Calibration in use", accepted ? [h("a", { href: `#/runs/${accepted.run_id}` }, shortId(accepted.run_id)), " ", when(accepted.measured_at)] : "none accepted yet"),
+        fact("Registered", when(robot.created_at)),
+      ),
+      h("section", { class: "card", id: "extrinsics" }, h("h2", {}, "Extrinsics over time"), frames.length ? frames.map((frame, i) => lidarHistory(frame, i, history.filter((p) => p.frame === frame), limits)) : h("p", { class: "muted" }, "No calibrated runs yet.")),
+      h("section", { class: "card" }, h("h2", {}, "Runs"), runsBody, more),
+    );
+  }
+
+  function fact(label, value) {
+    return h("div", {}, h("dt", {}, label), h("dd", {}, value));
+  }
+
+  function lidarHistory(frame, index, points, limits) {
+    const colour = COLOURS[index % COLOURS.length];
+    const first = points.find((p) => p.passed) || points[0];
+    const base = first.passed ? "the first accepted calibration" : "the first run (none accepted yet)";
+    const changes = points.map((p) => ({
+      point: p,
+      t: new Date(p.measured_at),
+      dt: p.translation.map((v, k) => (v - first.translation[k]) * 1000),
+      dr: rotationChangeDeg(first.rotation_xyzw, p.rotation_xyzw),
+    }));
+    const last = changes.at(-1);
+    const driftMm = Math.hypot(...last.dt), driftDeg = Math.hypot(...last.dr);
+    const tLimit = limits.max_translation_drift_m, rLimit = limits.max_rotation_drift_deg;
+    const within = (value, limit) => (limit === undefined || limit === null ? null : value <= limit);
+    const tOk = within(driftMm / 1000, tLimit), rOk = within(driftDeg, rLimit);
+    const series = (key, labels) => labels.map((label, k) => ({ label, colour: AXIS_COLOURS[k], points: changes.map((c) => ({ t: c.t, v: c[key][k], passed: c.point.passed, runId: c.point.run_id })) }));
+    const [rx, ry, rz] = rpyDeg(last.point.rotation_xyzw);
+    const judged = (ok) => (ok === null ? h("span", { class: "muted" }, "no limit") : h("span", { class: `badge ${ok ? "pass" : "fail"}` }, ok ? "within tolerance" : "over tolerance"));
+    return h(
+      "article",
+      { class: "lidar", dataset: { frame } },
+      h("h3", {}, swatch(colour), frame, last.point.is_reference ? h("span", { class: "muted" }, " (reference)") : null),
+      h(
+        "p",
+        {},
+        `Latest: t = [${last.point.translation.map((v) => v.toFixed(4)).join(", ")}] m, roll/pitch/yaw = [${[rx, ry, rz].map((v) => v.toFixed(3)).join(", ")}]° (T_base_lidar, ${ago(last.point.measured_at)}). `,
+      ),
+      h(
+        "p",
+        { class: "drift" },
+        `Drift since ${base}: `,
+        h("strong", {}, `${driftMm.toFixed(1)} mm`),
+        tLimit ? ` (limit ${(tLimit * 1000).toFixed(1)} mm) ` : " ",
+        judged(tOk),
+        ", ",
+        h("strong", {}, `${driftDeg.toFixed(3)}°`),
+        rLimit ? ` (limit ${rLimit}°) ` : " ",
+        judged(rOk),
+      ),
+      h(
+        "div",
+        { class: "charts" },
+        timeChart({
+          id: `chart-${frame}-translation`,
+          title: `${frame}: translation change since ${base} (base frame)`,
+          unit: "mm",
+          series: series("dt", ["Δx", "Δy", "Δz"]),
+          band: tLimit ? { lo: -tLimit * 1000, hi: tLimit * 1000, label: `drift tolerance ±${(tLimit * 1000).toFixed(1)} mm` } : null,
+          note: tLimit ? null : "The tolerance profile sets no translation drift limit.",
+        }),
+        timeChart({
+          id: `chart-${frame}-rotation`,
+          title: `${frame}: rotation change since ${base} (about the LiDAR's axes)`,
+          unit: "deg",
+          series: series("dr", ["about x", "about y", "about z"]),
+          band: rLimit ? { lo: -rLimit, hi: rLimit, label: `drift tolerance ±${rLimit}°` } : null,
+          note: rLimit ? null : "The tolerance profile sets no rotation drift limit.",
+        }),
+      ),
+    );
+  }
+
+  async function runPage(runId, my) {
+    const run = await api(`/v1/runs/${runId}`);
+    if (my !== generation) return;
+    setCrumbs([run.robot_id, `#/robots/${encodeURIComponent(run.robot_id)}`], [`run ${shortId(run.id)}`, null]);
+    const active = run.status === "queued" || run.status === "running";
+    const doc = run.result;
+    const sections = [
+      h("h1", {}, `Run ${shortId(run.id)} `, statusBadge(run.status), " ", h("span", { id: "verdict" }, verdictBadge(doc ? doc.verdict.passed : null))),
+      h(
+        "dl",
+        { class: "facts" },
+        fact("Robot", h("a", { href: `#/robots/${encodeURIComponent(run.robot_id)}` }, run.robot_id)),
+        fact("Kind", run.kind.replaceAll("_", " ")),
+        fact("Uploaded", when(run.created_at)),
+        fact("Attempts", `${run.attempts} of ${run.max_attempts}`),
+        fact("Recording", `${run.upload.format}, ${(run.upload.size / 1e6).toFixed(1)} MB`),
+        doc ? fact("Pipeline", `${doc.pipeline_version} (${(doc.config_hash || "").slice(0, 15)}…)`) : null,
+      ),
+    ];
+    if (active) sections.push(progressCard(run));
+    if (run.error) sections.push(h("section", { class: "card error-card", id: "run-error" }, h("h2", {}, run.error.title), h("p", {}, run.error.detail)));
+    if (doc) {
+      sections.push(
+        h(
+          "section",
+          { class: "card" },
+          h("h2", {}, "Metric error"),
+          h("p", { class: "metric", id: "metric-error" }, h("span", {}, `${mm(doc.metric_error.initial)} before`), " → ", h("strong", {}, `${mm(doc.metric_error.final)} after`), " calibration"),
+          h("p", { class: "muted small" }, "Mean distance of the other LiDARs' object points to the reference LiDAR's map."),
+        ),
+        checksCard(doc.verdict),
+        imagesCard(run),
+        lidarsCard(doc),
+        doc.drift ? driftCard(doc.drift) : null,
+        h("section", { class: "card" }, h("h2", {}, "Stage timings"), stageChart(doc.stages)),
+        downloadsCard(run),
+      );
+    }
+    show(...sections.filter(Boolean));
+    if (active) pollProgress(run, my);
+  }
+
+  // While a run is queued or running, only its progress card and status change: update those in
+  // place each second, and draw the whole page again once the run has finished.
+  function pollProgress(run, my) {
+    setTimeout(async () => {
+      if (my !== generation) return;
+      try {
+        const now = await api(`/v1/runs/${run.id}`);
+        if (my !== generation) return;
+        if (now.status === "queued" || now.status === "running") {
+          document.getElementById("progress").replaceWith(progressCard(now));
+          document.querySelector("h1 .badge[data-status]").replaceWith(statusBadge(now.status));
+          pollProgress(now, my);
+        } else {
+          await runPage(run.id, my);
+        }
+      } catch (err) {
+        if (my === generation) showError(err);
+      }
+    }, POLL_MS);
+  }
+
+  function progressCard(run) {
+    const fraction = run.status === "queued" ? 0 : Math.max(0, Math.min(1, run.progress || 0));
+    const bar = h("div", { class: "progress-bar" });
+    bar.style.width = `${(fraction * 100).toFixed(0)}%`;
+    return h(
+      "section",
+      { class: "card", id: "progress" },
+      h("h2", {}, run.status === "queued" ? "Waiting for a worker" : `Running: ${(run.stage || "starting").replaceAll("_", " ")}`),
+      h("div", { class: "progress", role: "progressbar", "aria-valuenow": Math.round(fraction * 100), "aria-valuemin": 0, "aria-valuemax": 100 }, bar),
+      h("p", { class: "muted small" }, `${(fraction * 100).toFixed(0)} % — this page updates every second.`),
+    );
+  }
+
+  function checksCard(verdict) {
+    return h(
+      "section",
+      { class: "card", id: "checks" },
+      h("h2", {}, "Verdict ", verdictBadge(verdict.passed)),
+      h(
+        "table",
+        {},
+        h("thead", {}, h("tr", {}, ["Check", "Value", "Limit", "", "Detail"].map((t) => h("th", {}, t)))),
+        h(
+          "tbody",
+          {},
+          (verdict.checks || []).map((check) =>
+            h(
+              "tr",
+              { class: check.passed ? "" : "failed-row", dataset: { check: check.name } },
+              h("td", {}, h("code", {}, check.name)),
+              h("td", { class: "num" }, typeof check.value === "number" ? num(check.value, 5) : "–"),
+              h("td", { class: "num" }, typeof check.limit === "number" ? num(check.limit, 5) : "–"),
+              h("td", {}, h("span", { class: `badge ${check.passed ? "pass" : "fail"}` }, check.passed ? "pass" : "fail")),
+              h("td", {}, check.detail || ""),
+            ),
+          ),
+        ),
+      ),
+    );
+  }
+
+  function imagesCard(run) {
+    const holder = h("div", { class: "images" }, h("p", { class: "muted" }, "Loading the report images…"));
+    (async () => {
+      const my = generation;
+      try {
+        const index = await api(`/v1/runs/${run.id}/report`);
+        if (my !== generation) return;
+        if (!index.images.length) {
+          const why = run.result && run.result.report && run.result.report.error;
+          holder.replaceChildren(h("p", { class: "muted", id: "no-images" }, why ? `No report images: ${why}` : "No report images for this run."));
+          return;
+        }
+        holder.replaceChildren(
+          ...index.images.map((image) => {
+            const img = h("img", { class: "report-image", alt: image.title, dataset: { name: image.name } });
+            const link = h("a", { target: "_blank", rel: "noopener" }, img);
+            blobUrl(image.url).then((url) => {
+              img.addEventListener("load", () => (img.dataset.loaded = "true"), { once: true });
+              img.src = url;
+              link.href = url;
+            });
+            return h("figure", { class: `report report-${image.name}` }, h("figcaption", {}, image.title), link);
+          }),
+        );
+      } catch (err) {
+        holder.replaceChildren(h("p", { class: "error" }, `Cannot load the report images: ${err.message}`));
+      }
+    })();
+    return h("section", { class: "card", id: "report" }, h("h2", {}, "Before and after"), holder);
+  }
+
+  function lidarsCard(doc) {
+    const frames = Object.keys(doc.lidars).sort((a, b) => (a === doc.reference_frame ? -1 : b === doc.reference_frame ? 1 : a.localeCompare(b)));
+    const pose = (p) => (p ? `[${p.translation.map((v) => v.toFixed(4)).join(", ")}] m, [${rpyDeg(p.rotation_xyzw).map((v) => v.toFixed(3)).join(", ")}]°` : "–");
+    return h(
+      "section",
+      { class: "card", id: "lidars" },
+      h("h2", {}, `Extrinsics T_${doc.base_frame || "base"}_lidar (translation, roll/pitch/yaw)`),
+      h(
+        "table",
+        {},
+        h("thead", {}, h("tr", {}, ["LiDAR", "Initial", "Calibrated", "Change", "Std. dev."].map((t) => h("th", {}, t)))),
+        h(
+          "tbody",
+          {},
+          frames.map((frame, i) => {
+            const lidar = doc.lidars[frame];
+            const cal = lidar.calibrated, init = lidar.initial;
+            const change = cal && init ? [Math.hypot(...cal.translation.map((v, k) => v - init.translation[k])), Math.hypot(...rotationChangeDeg(init.rotation_xyzw, cal.rotation_xyzw))] : null;
+            const sd = lidar.stddev;
+            return h(
+              "tr",
+              { dataset: { frame } },
+              h("td", {}, swatch(COLOURS[i % COLOURS.length]), frame, frame === doc.reference_frame ? h("span", { class: "muted" }, " (reference)") : null),
+              h("td", { class: "mono" }, pose(init)),
+              h("td", { class: "mono" }, cal ? pose(cal) : h("span", { class: "badge fail" }, `undetermined${lidar.undetermined ? `: ${lidar.undetermined}` : ""}`)),
+              h("td", { class: "num" }, change ? `${mm(change[0])}, ${deg(change[1])}` : "–"),
+              h("td", { class: "num" }, sd && sd.translation_m ? `${mm(Math.max(...sd.translation_m))}, ${deg(Math.max(...sd.rotation_deg))}` : "–"),
+            );
+          }),
+        ),
+      ),
+    );
+  }
+
+  function driftCard(drift) {
+    const against = drift.against === "design" ? "the model's design extrinsics" : "the last accepted calibration";
+    return h(
+      "section",
+      { class: "card", id: "drift" },
+      h("h2", {}, `Compared with ${against}`),
+      drift.run_id ? h("p", {}, "Reference run: ", h("a", { href: `#/runs/${drift.run_id}` }, shortId(drift.run_id))) : null,
+      h(
+        "table",
+        {},
+        h("thead", {}, h("tr", {}, ["LiDAR", "Translation", "Rotation"].map((t) => h("th", {}, t)))),
+        h("tbody", {}, Object.entries(drift.lidars || {}).map(([frame, d]) => h("tr", {}, h("td", {}, frame), h("td", { class: "num" }, mm(d.translation_m)), h("td", { class: "num" }, deg(d.rotation_deg))))),
+      ),
+      (drift.missing || []).length ? h("p", { class: "error" }, `Not calibrated in this run: ${drift.missing.join(", ")}`) : null,
+    );
+  }
+
+  function downloadsCard(run) {
+    const doc = run.result;
+    const message = h("p", { class: "error", id: "download-error" });
+    const allow = h("input", { type: "checkbox", id: "allow-failed" });
+    const button = (label, format, fallback) =>
+      h(
+        "button",
+        {
+          type: "button",
+          class: "download",
+          dataset: { format },
+          onclick: async (event) => {
+            const target = event.currentTarget;
+            message.textContent = "";
+            target.disabled = true;
+            try {
+              await download(`/v1/runs/${run.id}/exports/${format}${qs({ allow_failed: allow.checked ? "true" : null })}`, fallback);
+            } catch (err) {
+              message.textContent = `${label}: ${err.message}`;
+            } finally {
+              target.disabled = false;
+            }
+          },
+        },
+        label,
+      );
+    const resultJson = h(
+      "button",
+      {
+        type: "button",
+        class: "download",
+        dataset: { format: "result" },
+        onclick: () => {
+          const url = URL.createObjectURL(new Blob([JSON.stringify(doc, null, 2)], { type: "application/json" }));
+          const link = h("a", { href: url, download: `${run.robot_id}-${shortId(run.id)}-result.json`, hidden: true });
+          document.body.append(link);
+          link.click();
+          link.remove();
+          setTimeout(() => URL.revokeObjectURL(url), 60_000);
+        },
+      },
+      "result.json",
+    );
+    return h(
+      "section",
+      { class: "card", id: "downloads" },
+      h("h2", {}, "Downloads"),
+      h(
+        "div",
+        { class: "buttons" },
+        resultJson,
+        button("tf_static launch (ROS 2)", "tf-static", "tf_static.launch.yaml"),
+        button("URDF snippet", "urdf", "lidars.urdf"),
+        button("extrinsics.yaml", "extrinsics", "extrinsics.yaml"),
+        button("Calibrated recording", "recording", "calibrated.mcap"),
+      ),
+      doc.verdict.passed ? null : h("p", {}, h("label", {}, allow, " Export anyway: this calibration failed its verdict.")),
+      message,
+    );
+  }
+
+  function showError(err) {
+    if (err instanceof ApiError && err.status === 401) return keyForm("The key is unknown or revoked; enter another.");
+    show(h("section", { class: "card error-card", id: "page-error" }, h("h1", {}, err.problem ? err.problem.title : "Something went wrong"), h("p", {}, err.message), h("p", {}, h("a", { href: "#/" }, "Back to the fleet"))));
+  }
+
+  // -- routing ----------------------------------------------------------------------------------
+
+  async function route() {
+    const my = ++generation;
+    for (const url of blobUrls) URL.revokeObjectURL(url);
+    blobUrls = [];
+    if (!sessionStorage.getItem(KEY_STORAGE)) {
+      keyForm();
+      app.dataset.route = "key";
+      app.dataset.ready = "true";
+      return;
+    }
+    forgetButton.hidden = false;
+    const path = location.hash.replace(/^#/, "") || "/";
+    // For tests and scripts: which page is shown, and whether it has finished drawing.
+    app.dataset.route = path;
+    app.dataset.ready = "false";
+    let match;
+    try {
+      if ((match = path.match(/^\/robots\/([^/]+)$/))) await robotPage(decodeURIComponent(match[1]), my);
+      else if ((match = path.match(/^\/runs\/([0-9a-f-]{36})$/))) await runPage(match[1], my);
+      else await overviewPage(my);
+    } catch (err) {
+      if (my === generation) showError(err);
+    }
+    if (my === generation) app.dataset.ready = "true";
+  }
+
+  forgetButton.addEventListener("click", () => {
+    sessionStorage.removeItem(KEY_STORAGE);
+    route();
+  });
+  window.addEventListener("hashchange", route);
+  route();
+})();

@@ -1,0 +1,156 @@
+"""Fixtures for the dashboard, report and export tests: a seeded fleet (see `seed`), the app served
+by uvicorn on a free loopback port, and headless Chromium driven by Selenium.
+
+Screenshots go to `$FLEETCAL_TEST_ARTIFACTS` (CI keeps that folder), else `tests-artifacts/` at
+the repository root.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+import uvicorn
+
+from service.app import create_app
+from service.auth import create_key
+from service.db import Database
+from service.models import Scope
+from service.settings import Settings
+from service.storage import make_storage
+from tests.service.conftest import Api
+from tests.service.dashboard.seed import Fleet, recording_bytes, report_images, seed_fleet
+
+REPO_ROOT = Path(__file__).resolve().parents[3]
+CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome", "chrome")
+CHROMEDRIVER_NAMES = ("chromedriver", "chromium-driver")
+
+
+@pytest.fixture(scope="session")
+def seed_images() -> dict[str, bytes]:
+    return report_images()
+
+
+@pytest.fixture(scope="session")
+def seed_recording(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    return recording_bytes(tmp_path_factory.mktemp("seed"))
+
+
+@pytest.fixture
+def fleet(api: Api, seed_recording: bytes, seed_images: dict[str, bytes]) -> Fleet:
+    """The seeded fleet in the `api` fixture's database (SQLite and PostgreSQL)."""
+    return seed_fleet(api.services.db, api.services.storage, seed_recording, seed_images)
+
+
+@pytest.fixture(scope="session")
+def artifacts_dir() -> Path:
+    path = Path(os.environ.get("FLEETCAL_TEST_ARTIFACTS", REPO_ROOT / "tests-artifacts"))
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+# -- the app on a real socket ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LiveApp:
+    url: str
+    read_key: str
+    fleet: Fleet
+
+
+def _free_socket() -> socket.socket:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(64)
+    return sock
+
+
+@pytest.fixture(scope="module")
+def live_app(
+    tmp_path_factory: pytest.TempPathFactory,
+    seed_recording: bytes,
+    seed_images: dict[str, bytes],
+) -> Iterator[LiveApp]:
+    """The app (SQLite, local storage) served by uvicorn from a thread, with the fleet seeded."""
+    data = tmp_path_factory.mktemp("live")
+    settings = Settings(data_dir=data)
+    db = Database.from_settings(settings)
+    db.upgrade()
+    fleet = seed_fleet(db, make_storage(settings), seed_recording, seed_images)
+    with db.transaction() as session:
+        read_key = create_key(session, [Scope.READ], name="dashboard test").secret
+    db.dispose()
+
+    sock = _free_socket()
+    server = uvicorn.Server(
+        uvicorn.Config(create_app(settings), log_level="warning", lifespan="on")
+    )
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    while not server.started:
+        if not thread.is_alive():
+            pytest.fail("the app did not start; see the log")
+        time.sleep(0.05)
+    url = f"http://127.0.0.1:{sock.getsockname()[1]}"
+    assert httpx.get(f"{url}/healthz").status_code == 200
+    yield LiveApp(url=url, read_key=read_key, fleet=fleet)
+    server.should_exit = True
+    thread.join(timeout=30)
+    sock.close()
+
+
+# -- the browser ----------------------------------------------------------------------------------
+
+
+def _which(names: tuple[str, ...], env: str) -> str | None:
+    if os.environ.get(env):
+        return os.environ[env]
+    return next((found for name in names if (found := shutil.which(name))), None)
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
+    """Headless Chromium through chromedriver; skipped (with the reason) only if not installed."""
+    chromium = _which(CHROMIUM_NAMES, "FLEETCAL_CHROMIUM")
+    driver_path = _which(CHROMEDRIVER_NAMES, "FLEETCAL_CHROMEDRIVER")
+    if chromium is None or driver_path is None:
+        pytest.skip(
+            "headless Chromium is not installed (Debian: apt-get install chromium chromium-driver; "
+            "or set FLEETCAL_CHROMIUM and FLEETCAL_CHROMEDRIVER); CI installs it"
+        )
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = chromium
+    for argument in (
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--disable-dev-shm-usage",
+        "--window-size=1400,1000",
+        f"--user-data-dir={tmp_path_factory.mktemp('chromium-profile')}",
+    ):
+        options.add_argument(argument)
+    driver = webdriver.Chrome(service=Service(executable_path=driver_path), options=options)
+    driver.set_page_load_timeout(60)
+    try:
+        yield driver
+    finally:
+        driver.quit()

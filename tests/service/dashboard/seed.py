@@ -1,0 +1,266 @@
+"""A small fleet for the dashboard and export tests, written through the data layer and storage
+the way the API and the worker write it: a real recording per run, result documents, report
+images drawn from the `tiny` scenario, a tolerance profile with drift limits, and one run of
+each state.
+
+R1 (model demo-bot): end-of-line passed 20 days ago, maintenance 10 days ago failed on drift (a
+hit mount), maintenance yesterday passed again. R2: a run that failed (no stops). R3: a run in
+progress.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import uuid
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+from pipeline.io.writer import WriterFormat
+from pipeline.report import render
+from pipeline.synth import simulate_problem
+from pipeline.transforms import Matrix4, from_xyz_rpy, pose_difference, to_translation_xyzw
+from service import repository
+from service.db import Database
+from service.models import Run, RunKind, RunStatus
+from service.reports import store_report_images
+from service.storage import Storage
+from tests.pipeline.io.recordings import PERTURBATION, TRUE_EXTRINSICS, Spec, write_recording
+from tests.pipeline.test_report import truth_report_input
+
+PROFILE_LIMITS = {
+    "max_metric_error_m": 0.01,
+    "max_translation_drift_m": 0.01,
+    "max_rotation_drift_deg": 0.5,
+}
+INITIAL = {frame: T @ PERTURBATION for frame, T in TRUE_EXTRINSICS.items()}
+HIT = {  # the rear mount knocked 15 mm and 0.8 deg
+    "lidar_front": TRUE_EXTRINSICS["lidar_front"],
+    "lidar_rear": TRUE_EXTRINSICS["lidar_rear"] @ from_xyz_rpy([0.015, 0, 0], [0, 0, 0.014]),
+}
+REPAIRED = {
+    "lidar_front": TRUE_EXTRINSICS["lidar_front"],
+    "lidar_rear": TRUE_EXTRINSICS["lidar_rear"] @ from_xyz_rpy([0.002, -0.001, 0], [0, 0.001, 0]),
+}
+STAGES = {
+    "download": 0.02,
+    "read": 0.31,
+    "denoise": 0.42,
+    "segmentation": 0.55,
+    "rough_refinement": 0.08,
+    "optimisation": 1.93,
+    "metric": 0.02,
+    "observability": 0.01,
+    "verdict": 0.0,
+}
+
+
+@dataclass(frozen=True)
+class Fleet:
+    """The seeded runs' ids and what their results say."""
+
+    end_of_line: uuid.UUID
+    hit: uuid.UUID
+    repaired: uuid.UUID
+    failed: uuid.UUID
+    running: uuid.UUID
+    documents: dict[uuid.UUID, dict[str, Any]]
+
+
+def report_images() -> dict[str, bytes]:
+    """The report of the `tiny` scenario: recorded poses before, the synthesiser's truth after."""
+    return render(truth_report_input(*simulate_problem("tiny", seed=0)))
+
+
+def recording_bytes(scratch: Path) -> bytes:
+    """A small ROS 2 MCAP recording whose tf_static holds `INITIAL` (rear LiDAR via a mount)."""
+    bag = scratch / "seed_recording"
+    write_recording(bag, WriterFormat.ROS2_MCAP, Spec(stops=2, points=200))
+    return (bag / "seed_recording.mcap").read_bytes()
+
+
+def pose(T: Matrix4) -> dict[str, list[float]]:
+    translation, quat = to_translation_xyzw(T)
+    return {"translation": translation.tolist(), "rotation_xyzw": quat.tolist()}
+
+
+def result_document(
+    calibrated: dict[str, Matrix4],
+    *,
+    metric: tuple[float, float],
+    checks: list[dict[str, Any]],
+    drift_from: dict[str, Matrix4] | None = None,
+    drift_run: uuid.UUID | None = None,
+) -> dict[str, Any]:
+    """A `result.json` as the worker stores it (DESIGN.md's output contract)."""
+    passed = all(check["passed"] for check in checks)
+    document: dict[str, Any] = {
+        "schema_version": 1,
+        "reference_frame": "lidar_front",
+        "base_frame": "base_link",
+        "lidars": {
+            frame: {
+                "topic": f"/{frame}/points",
+                "initial": pose(INITIAL[frame]),
+                "calibrated": pose(T),
+                "stddev": {"translation_m": [0.0008, 0.0007, 0.0011], "rotation_deg": [0.02] * 3},
+            }
+            for frame, T in calibrated.items()
+        },
+        "metric_error": {"initial": metric[0], "final": metric[1]},
+        "verdict": {"passed": passed, "checks": checks},
+        "stages": {name: {"seconds": seconds} for name, seconds in STAGES.items()},
+        "pipeline_version": "0.1.0",
+        "config_hash": "sha256:" + "5e" * 32,
+        "tolerance_profile": "demo-bot",
+        "report": {"images": ["map-top", "map-side", "error"]},
+    }
+    if drift_from is not None:
+        differences = {
+            frame: pose_difference(drift_from[frame], T) for frame, T in calibrated.items()
+        }
+        document["drift"] = {
+            "against": "last_accepted",
+            "run_id": str(drift_run),
+            "lidars": {
+                frame: {"translation_m": t, "rotation_deg": r}
+                for frame, (t, r) in differences.items()
+            },
+            "missing": [],
+        }
+    return document
+
+
+def metric_check(value: float) -> dict[str, Any]:
+    return {
+        "name": "metric_error",
+        "value": value,
+        "limit": 0.01,
+        "passed": value <= 0.01,
+        "detail": "",
+    }
+
+
+def drift_checks(
+    calibrated: dict[str, Matrix4], reference: dict[str, Matrix4]
+) -> list[dict[str, Any]]:
+    checks = []
+    for frame, T in sorted(calibrated.items()):
+        t, r = pose_difference(reference[frame], T)
+        for name, value, limit, unit in (
+            (f"drift_translation:{frame}", t, PROFILE_LIMITS["max_translation_drift_m"], "m"),
+            (f"drift_rotation:{frame}", r, PROFILE_LIMITS["max_rotation_drift_deg"], "deg"),
+        ):
+            passed = value <= limit
+            checks.append(
+                {
+                    "name": name,
+                    "value": value,
+                    "limit": limit,
+                    "passed": passed,
+                    "detail": ""
+                    if passed
+                    else f"{frame} is {value:.4g} {unit} away from its "
+                    "last accepted calibration: has its mount moved or been hit?",
+                }
+            )
+    return checks
+
+
+def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[str, bytes]) -> Fleet:
+    now = datetime.now(UTC)
+    with db.transaction() as session:
+        repository.put_tolerance_profile(
+            session,
+            "demo-bot",
+            robot_model="demo-bot",
+            is_default=False,
+            limits=PROFILE_LIMITS,
+            design_extrinsics=None,
+        )
+        repository.put_robot(session, "R1", model="demo-bot", metadata={"site": "line 2"})
+
+    documents: dict[uuid.UUID, dict[str, Any]] = {}
+    eol = _upload(db, storage, recording, "R1", RunKind.END_OF_LINE, now - timedelta(days=20))
+    documents[eol] = result_document(
+        TRUE_EXTRINSICS, metric=(0.0912, 0.0015), checks=[metric_check(0.0015)]
+    )
+    hit = _upload(db, storage, recording, "R1", RunKind.MAINTENANCE, now - timedelta(days=10))
+    documents[hit] = result_document(
+        HIT,
+        metric=(0.0261, 0.0016),
+        checks=[metric_check(0.0016), *drift_checks(HIT, TRUE_EXTRINSICS)],
+        drift_from=TRUE_EXTRINSICS,
+        drift_run=eol,
+    )
+    repaired = _upload(db, storage, recording, "R1", RunKind.MAINTENANCE, now - timedelta(days=1))
+    documents[repaired] = result_document(
+        REPAIRED,
+        metric=(0.0203, 0.0014),
+        checks=[metric_check(0.0014), *drift_checks(REPAIRED, TRUE_EXTRINSICS)],
+        drift_from=TRUE_EXTRINSICS,
+        drift_run=eol,
+    )
+    for run_id, document in documents.items():
+        store_report_images(storage, run_id, images)
+        with db.transaction() as session:
+            repository.store_result(session, run_id, document)
+            _took(session, run_id, seconds=sum(STAGES.values()))
+
+    failed = _upload(db, storage, recording, "R2", RunKind.END_OF_LINE, now - timedelta(hours=3))
+    with db.transaction() as session:
+        repository.fail_run(
+            session,
+            failed,
+            {
+                "type": "urn:fleetcal:problem:bad-recording",
+                "title": "The recording cannot be calibrated",
+                "status": 422,
+                "detail": "no stops found in the trajectory: the robot never stood still for 1 s",
+            },
+        )
+        _took(session, failed, seconds=0.4)
+    running = _upload(db, storage, recording, "R3", RunKind.END_OF_LINE, now - timedelta(minutes=2))
+    with db.transaction() as session:
+        run = session.get(Run, running)
+        assert run is not None
+        run.status, run.attempts, run.started_at = RunStatus.RUNNING, 1, now
+        run.stage, run.progress = "optimisation", 0.45
+    return Fleet(eol, hit, repaired, failed, running, documents)
+
+
+def _took(session: Any, run_id: uuid.UUID, seconds: float) -> None:
+    run = session.get(Run, run_id)
+    run.started_at = run.created_at + timedelta(seconds=1)
+    run.finished_at = run.started_at + timedelta(seconds=seconds)
+
+
+def _upload(
+    db: Database, storage: Storage, recording: bytes, robot: str, kind: RunKind, at: datetime
+) -> uuid.UUID:
+    run_id = uuid.uuid4()
+    key = f"recordings/{robot}/{run_id}"
+    upload = storage.begin_upload(key)
+    upload.write(recording)
+    upload.commit()
+    with db.transaction() as session:
+        run = repository.record_upload(
+            session,
+            repository.NewUpload(
+                run_id=run_id,
+                robot_id=robot,
+                kind=kind,
+                size=len(recording),
+                sha256=hashlib.sha256(recording).hexdigest(),
+                format="mcap",
+                storage_key=key,
+                idempotency_key=None,
+                config=None,
+                max_attempts=3,
+            ),
+            create_robot=True,
+        )
+        # History is about time: each run as if uploaded `at`.
+        run.created_at = run.available_at = run.updated_at = at
+    return run_id
