@@ -4,7 +4,10 @@ run and no file. (TestClient reads a request body whole, so these drive the app 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import socket
+import time
 import tracemalloc
 import uuid
 from collections.abc import AsyncIterator, Iterator, MutableMapping
@@ -211,3 +214,52 @@ def test_an_upload_lands_in_s3_storage(settings: Settings, s3_env: None, s3_endp
         keys = [o["Key"] for o in client.list_objects_v2(Bucket=bucket).get("Contents", [])]
         assert keys == [f"recordings-eu/{row.storage_key}"]
         assert client.list_multipart_uploads(Bucket=bucket).get("Uploads", []) == []
+
+
+@contextlib.contextmanager
+def _live_server(app: FastAPI) -> Iterator[int]:
+    """The app under a real uvicorn server on loopback, in a thread."""
+    import threading
+
+    import uvicorn
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = int(probe.getsockname()[1])
+    server = uvicorn.Server(
+        uvicorn.Config(app, host="127.0.0.1", port=port, log_level="error", lifespan="off")
+    )
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 10
+    while not server.started:
+        assert time.monotonic() < deadline, "uvicorn did not start"
+        time.sleep(0.02)
+    try:
+        yield port
+    finally:
+        server.should_exit = True
+        thread.join(10)
+
+
+def test_a_real_connection_dropped_mid_upload_leaves_nothing(
+    app_and_key: tuple[FastAPI, Services, str],
+) -> None:
+    app, services, key = app_and_key
+    with _live_server(app) as port:
+        with socket.create_connection(("127.0.0.1", port)) as client:
+            client.sendall(
+                b"POST /v1/robots/R1/runs?kind=end_of_line HTTP/1.1\r\nHost: fleetcal\r\n"
+                + f"X-API-Key: {key}\r\nContent-Length: {64 * MIB}\r\n\r\n".encode()
+                + recording(3 * MIB)
+            )
+            deadline = time.monotonic() + 10
+            while not _stored(services):  # the upload has begun writing
+                assert time.monotonic() < deadline, "the upload never started"
+                time.sleep(0.02)
+        # The client is gone; the server notices, aborts, and answers no one.
+        deadline = time.monotonic() + 10
+        while _stored(services):
+            assert time.monotonic() < deadline, f"left behind: {_stored(services)}"
+            time.sleep(0.05)
+        assert _run_count(services) == 0
