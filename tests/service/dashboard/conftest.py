@@ -76,7 +76,7 @@ def _free_socket() -> socket.socket:
     return sock
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def live_app(
     tmp_path_factory: pytest.TempPathFactory,
     seed_recording: bytes,
