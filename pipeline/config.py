@@ -1,0 +1,101 @@
+"""`PipelineConfig`: every parameter of the pipeline, one frozen config per stage, paper defaults.
+
+Defaults -> YAML file (`load_config`, unknown keys rejected); `resolved` is the full config as
+plain data and `config_hash` its `sha256:` digest, both stored with every result.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from pipeline.denoise import DenoiseConfig
+from pipeline.downsample import DownsampleConfig
+from pipeline.errors import ConfigError
+from pipeline.io.config import ReaderConfig
+from pipeline.metric import MetricConfig
+from pipeline.observability import ObservabilityConfig
+from pipeline.optimisation import OptimisationConfig
+from pipeline.rough_refinement import RoughRefinementConfig
+from pipeline.segmentation import SegmentationConfig
+from pipeline.verdict import VerdictConfig
+
+_FROZEN = ConfigDict(frozen=True, extra="forbid")
+
+
+class FramesConfig(BaseModel):
+    """Which LiDAR is the reference, and (optionally) where the floor lies in the base frame."""
+
+    model_config = _FROZEN
+
+    reference_frame: str | None = None
+    """The reference LiDAR's frame; None: the first LiDAR frame in sorted order."""
+    base_height_above_floor_m: float | None = Field(
+        default=None,
+        description="when set, the base frame's z axis is the floor normal and its origin this "
+        "high above the floor (0: on the floor, like REP 105's base_footprint), so the "
+        "reference LiDAR's height, roll and pitch come from the floor; None: they stay as given",
+    )
+
+
+class PipelineConfig(BaseModel):
+    """The whole pipeline's parameters, stage by stage."""
+
+    model_config = _FROZEN
+
+    reader: ReaderConfig = ReaderConfig()
+    frames: FramesConfig = FramesConfig()
+    downsample: DownsampleConfig = DownsampleConfig()
+    denoise: DenoiseConfig = DenoiseConfig()
+    segmentation: SegmentationConfig = SegmentationConfig()
+    rough_refinement: RoughRefinementConfig = RoughRefinementConfig()
+    optimisation: OptimisationConfig = OptimisationConfig()
+    metric: MetricConfig = MetricConfig()
+    observability: ObservabilityConfig = ObservabilityConfig()
+    verdict: VerdictConfig = VerdictConfig()
+
+
+def config_from_mapping(data: Mapping[str, Any] | None) -> PipelineConfig:
+    """A `PipelineConfig` from nested plain data (missing keys keep their defaults)."""
+    try:
+        return PipelineConfig.model_validate(dict(data or {}))
+    except ValidationError as err:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc']) or '(top level)'}: {e['msg']}"
+            for e in err.errors()
+        )
+        raise ConfigError(f"invalid pipeline config: {problems}") from err
+
+
+def load_config(path: Path | str) -> PipelineConfig:
+    """Read a YAML file of (some of) the pipeline's parameters; unknown keys are errors."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise ConfigError(f"cannot read config file {path}: {err.strerror or err}") from err
+    except yaml.YAMLError as err:
+        raise ConfigError(f"config file {path} is not valid YAML: {err}") from err
+    if data is not None and not isinstance(data, Mapping):
+        raise ConfigError(
+            f"config file {path} must hold a mapping of sections (segmentation: ..., ...), "
+            f"not a {type(data).__name__}"
+        )
+    return config_from_mapping(data)
+
+
+def resolved(config: PipelineConfig) -> dict[str, Any]:
+    """Every parameter, defaults included, as JSON-ready data."""
+    return config.model_dump(mode="json")
+
+
+def config_hash(config: PipelineConfig) -> str:
+    """`sha256:<hex>` of the resolved config in canonical JSON (sorted keys, no spaces)."""
+    canonical = json.dumps(resolved(config), sort_keys=True, separators=(",", ":"))
+    return "sha256:" + hashlib.sha256(canonical.encode("utf-8")).hexdigest()

@@ -1,0 +1,594 @@
+"""Stage 4: stop poses and extrinsics refined together on object points, like ICP.
+
+Unknowns: `T_G_ref` per stop (stop 0 fixed: the gauge) and `T_ref_lidar` per non-reference LiDAR.
+Each iteration places every object cloud in G, associates each point with its nearest neighbour
+in the reference LiDAR's object map (kd-tree), and takes one Levenberg-Marquardt step on the
+robust cost below, with the normal equations assembled in numpy:
+
+- cross terms: points of LiDAR i at stop j against the reference map (eq. 11 of the paper);
+- reference self-consistency: reference points at stop j against the reference map of the other
+  stops, so the map the others are aligned to cannot bend;
+- floor terms: every (LiDAR, stop) floor plane against the floor in G from stage 3, so the objects
+  cannot trade roll, pitch or height for a slightly better fit.
+
+Twists are `[rho (3), phi (3)]` applied on the left: `T_G_ref <- exp(d) T_G_ref` in G, and
+`T_ref_lidar <- exp(e) T_ref_lidar` in the reference frame.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+from pykdtree.kdtree import KDTree
+
+from pipeline.rough_refinement import adjoint, plane_in_parent, tangent_basis
+from pipeline.segmentation import Plane
+from pipeline.surfaces import local_planes
+from pipeline.transforms import Matrix4, Points, exp_se3
+
+_FROZEN = ConfigDict(frozen=True, extra="forbid")
+
+ResidualKind = Literal["point_to_point", "point_to_plane"]
+RobustLoss = Literal["cauchy", "huber", "none"]
+
+
+class OptimisationConfig(BaseModel):
+    """The joint optimisation; lengths in metres, angles in degrees."""
+
+    model_config = _FROZEN
+
+    residual: ResidualKind = "point_to_plane"
+    max_iterations: int = Field(default=200, ge=1, description="the paper's 200")
+    robust_loss: RobustLoss = "cauchy"
+    kernel_scale_initial_m: float = Field(
+        default=0.1, gt=0, description="the robust kernel's scale at the first iteration"
+    )
+    kernel_scale_decay: float = Field(
+        default=0.8, gt=0, le=1, description="the scale shrinks by this factor every iteration..."
+    )
+    kernel_scale_min_m: float = Field(default=0.015, gt=0, description="...down to this")
+    max_correspondence_m: float = Field(
+        default=0.5, gt=0, description="pairs further apart than this are ignored"
+    )
+    point_sigma_m: float = Field(
+        default=0.01, gt=0, description="standard deviation of a point residual"
+    )
+    reference_self_consistency: bool = True
+    floor_terms: bool = True
+    floor_normal_sigma_deg: float = Field(default=0.02, gt=0)
+    floor_offset_sigma_m: float = Field(default=0.001, gt=0)
+    self_neighbours: int = Field(
+        default=4,
+        ge=1,
+        description="neighbours searched for a reference point's match from another stop",
+    )
+    normal_neighbours: int = Field(
+        default=30, ge=3, description="neighbours of a reference point whose plane gives its normal"
+    )
+    smooth_clouds: bool = Field(
+        default=True,
+        description="project every object point onto its local plane (removes range noise)",
+    )
+    max_points_per_cloud: int | None = Field(
+        default=None,
+        ge=10,
+        description="random subset of each (LiDAR, stop) object cloud; None keeps all",
+    )
+    translation_tolerance_m: float = Field(
+        default=1e-5, gt=0, description="converged when no pose moves more than this in one step"
+    )
+    rotation_tolerance_deg: float = Field(default=1e-3, gt=0)
+    initial_damping: float = Field(
+        default=1e-4, ge=0, description="Levenberg-Marquardt lambda at start"
+    )
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class ParameterLayout:
+    """Where each pose's 6 parameters sit in the state vector; stop 0 and LiDAR 0 are fixed."""
+
+    n_stops: int
+    n_lidars: int
+
+    @property
+    def size(self) -> int:
+        return 6 * (self.n_stops - 1 + self.n_lidars - 1)
+
+    def stop(self, index: int) -> int:
+        """First column of stop `index`, -1 when fixed."""
+        return -1 if index == 0 else 6 * (index - 1)
+
+    def lidar(self, index: int) -> int:
+        """First column of LiDAR `index`, -1 when fixed."""
+        return -1 if index == 0 else 6 * (self.n_stops - 1) + 6 * (index - 1)
+
+
+@dataclass(frozen=True)
+class OptimisationResult:
+    """Refined `T_G_ref` (J, 4, 4) and `T_ref_lidar` (L, 4, 4), with how it got there.
+
+    `error_per_iteration[k]`: eq. 11 before step k (mean nearest-neighbour distance, metres, of
+    the non-reference object points to the reference map), the last entry after the final step.
+    `T_ref_lidar_per_iteration` (K + 1, L, 4, 4): the extrinsics before each step and at the end.
+    `information` (P, P): J^T W J at the solution, weights in 1/sigma^2 (see `layout`);
+    `variance_factor`: a-posteriori sum of weighted squared residuals over the redundancy.
+    """
+
+    T_G_ref: NDArray[np.float64]
+    T_ref_lidar: NDArray[np.float64]
+    converged: bool
+    iterations: int
+    error_per_iteration: tuple[float, ...]
+    T_ref_lidar_per_iteration: NDArray[np.float64]
+    information: NDArray[np.float64]
+    variance_factor: float
+    layout: ParameterLayout
+    correspondences: tuple[int, ...]
+    residual_rms_m: float
+    seconds: float
+
+
+# -- data kept across iterations ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Clouds:
+    """Object clouds concatenated: rows of (lidar, stop) slices, points in their own frame."""
+
+    points: Points
+    lidar: NDArray[np.int64]
+    stop: NDArray[np.int64]
+    slices: tuple[tuple[int, int, int, int], ...]  # (lidar, stop, start, end)
+
+    @staticmethod
+    def build(parts: Sequence[tuple[int, int, Points]]) -> _Clouds:
+        slices, start = [], 0
+        for lidar, stop, pts in parts:
+            slices.append((lidar, stop, start, start + len(pts)))
+            start += len(pts)
+        points = np.concatenate([p for *_, p in parts]) if parts else np.zeros((0, 3))
+        sizes = [len(p) for *_, p in parts]
+        lidar_of = np.repeat(np.array([i for i, *_ in parts], dtype=np.int64), sizes)
+        stop_of = np.repeat(np.array([j for _, j, _ in parts], dtype=np.int64), sizes)
+        return _Clouds(
+            np.ascontiguousarray(points, dtype=np.float64), lidar_of, stop_of, tuple(slices)
+        )
+
+    def transformed(self, poses: Sequence[Matrix4], vectors: Points | None = None) -> Points:
+        """Each slice's points (or `vectors`, rotated only) mapped by `poses[slice]` (4, 4)."""
+        source = self.points if vectors is None else vectors
+        out = np.empty_like(source)
+        for (_, _, a, b), T in zip(self.slices, poses, strict=True):
+            out[a:b] = source[a:b] @ T[:3, :3].T
+            if vectors is None:
+                out[a:b] += T[:3, 3]
+        return out
+
+
+def _hat_batch(v: Points) -> NDArray[np.float64]:
+    out = np.zeros((len(v), 3, 3))
+    out[:, 0, 1], out[:, 0, 2] = -v[:, 2], v[:, 1]
+    out[:, 1, 0], out[:, 1, 2] = v[:, 2], -v[:, 0]
+    out[:, 2, 0], out[:, 2, 1] = -v[:, 1], v[:, 0]
+    return out
+
+
+def robust_weight_and_cost(
+    distance: NDArray[np.float64], scale: float, loss: RobustLoss
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """IRLS weight w(s) = rho'(s)/s and cost rho(s) for distances `s` (N,); rho(s) ~ s^2/2 at 0."""
+    if loss == "cauchy":
+        ratio = (distance / scale) ** 2
+        return 1.0 / (1.0 + ratio), 0.5 * scale**2 * np.log1p(ratio)
+    if loss == "huber":
+        inside = distance <= scale
+        weight = np.where(inside, 1.0, scale / np.maximum(distance, 1e-300))
+        cost = np.where(inside, 0.5 * distance**2, scale * (distance - 0.5 * scale))
+        return weight, cost
+    return np.ones_like(distance), 0.5 * distance**2
+
+
+@dataclass(frozen=True)
+class _Placed:
+    """Every cloud placed with one set of poses: sources in the reference frame of their stop
+    (`source_ref`) and in G, the reference map and its normals in G."""
+
+    source_ref: Points
+    source_G: Points
+    reference_G: Points
+    normals_G: Points
+
+
+@dataclass(frozen=True)
+class _Pairs:
+    """Associations of one iteration: source rows, target rows in the reference map."""
+
+    source: NDArray[np.int64]
+    target: NDArray[np.int64]
+    cross_error: float  # eq. 11 over every non-reference point (no gate)
+
+
+class _Problem:
+    """Everything one iteration needs; poses are passed in so trial steps can be evaluated."""
+
+    def __init__(
+        self,
+        objects: Sequence[Sequence[Points]],
+        planes: Sequence[Sequence[Plane | None]] | None,
+        floor_G: Plane | None,
+        n_stops: int,
+        config: OptimisationConfig,
+        normals: Sequence[Sequence[Points]] | None = None,
+    ) -> None:
+        self.config = config
+        self.layout = ParameterLayout(n_stops, len(objects))
+        rng = np.random.default_rng(config.seed)
+        parts: list[tuple[int, int, Points]] = []
+        kept: list[tuple[int, int, NDArray[np.int64]]] = []
+        for lidar, clouds in enumerate(objects):
+            for stop, cloud in enumerate(clouds):
+                pts = np.asarray(cloud, dtype=np.float64)
+                keep = np.arange(len(pts))
+                cap = config.max_points_per_cloud
+                if cap is not None and len(pts) > cap:
+                    keep = np.sort(rng.choice(len(pts), size=cap, replace=False))
+                if len(keep):
+                    parts.append((lidar, stop, pts[keep]))
+                    kept.append((lidar, stop, keep))
+        if normals is None:
+            # Every cloud is smoothed the same way, as source and as target: an asymmetric
+            # treatment (only the reference smoothed) measured a bias of 1-2 cm on range noise.
+            surfaces = [local_planes(p, config.normal_neighbours) for *_, p in parts]
+            if config.smooth_clouds:
+                parts = [
+                    (i, j, surface[0]) for (i, j, _), surface in zip(parts, surfaces, strict=True)
+                ]
+            part_normals = [surface[1] for surface in surfaces]
+        else:
+            part_normals = [
+                np.asarray(normals[i][j], dtype=np.float64)[keep] for i, j, keep in kept
+            ]
+        reference = [p for p in parts if p[0] == 0]
+        self.reference = _Clouds.build(reference)
+        reference_normals = [n for (i, *_), n in zip(parts, part_normals, strict=True) if i == 0]
+        self.reference_normals = (
+            np.concatenate(reference_normals) if reference_normals else np.zeros((0, 3))
+        )
+        sources = [p for p in parts if p[0] > 0 or config.reference_self_consistency]
+        self.sources = _Clouds.build(sources)
+        self.source_starts = np.array([a for *_, a, _ in self.sources.slices], dtype=np.int64)
+        self.floor: list[tuple[int, int, Plane]] = []
+        if planes is not None and floor_G is not None and config.floor_terms:
+            self.floor = [
+                (lidar, stop, plane)
+                for lidar, row in enumerate(planes)
+                for stop, plane in enumerate(row)
+                if plane is not None
+            ]
+        self.floor_G = floor_G
+        self.floor_sigma = np.array(
+            [np.radians(config.floor_normal_sigma_deg)] * 2 + [config.floor_offset_sigma_m]
+        )
+
+    def place(self, T_G_ref: NDArray[np.float64], T_ref_lidar: NDArray[np.float64]) -> _Placed:
+        sources, reference = self.sources.slices, self.reference.slices
+        source_ref = self.sources.transformed([T_ref_lidar[i] for i, *_ in sources])
+        source_G = _Clouds(source_ref, self.sources.lidar, self.sources.stop, sources).transformed(
+            [T_G_ref[j] for _, j, *_ in sources]
+        )
+        reference_poses = [T_G_ref[j] for _, j, *_ in reference]
+        return _Placed(
+            source_ref,
+            source_G,
+            self.reference.transformed(reference_poses),
+            self.reference.transformed(reference_poses, self.reference_normals),
+        )
+
+    # -- association -------------------------------------------------------------------------
+
+    def associate(self, placed: _Placed) -> _Pairs:
+        empty = np.zeros(0, dtype=np.int64)
+        if len(self.reference.points) == 0 or len(self.sources.points) == 0:
+            return _Pairs(empty, empty, float("nan"))
+        tree = KDTree(placed.reference_G)
+        gate = self.config.max_correspondence_m
+        sources, targets = [], []
+        cross = np.flatnonzero(self.sources.lidar > 0)
+        cross_error = float("nan")
+        if len(cross):
+            distance, index = tree.query(placed.source_G[cross], k=1)
+            cross_error = float(np.mean(distance))
+            keep = distance < gate
+            sources.append(cross[keep])
+            targets.append(index[keep].astype(np.int64))
+        own = np.flatnonzero(self.sources.lidar == 0)
+        if len(own):
+            # The nearest reference point seen from *another* stop: a stop's own points would
+            # tie every point to itself. Among the k nearest, take the first from another stop.
+            k = min(self.config.self_neighbours, len(placed.reference_G))
+            distance, index = tree.query(placed.source_G[own], k=k, distance_upper_bound=gate)
+            distance, index = distance.reshape(len(own), k), index.reshape(len(own), k)
+            found = index < len(placed.reference_G)
+            other = found & (
+                self.reference.stop[np.where(found, index, 0)] != self.sources.stop[own][:, None]
+            )
+            first = np.argmax(other, axis=1)
+            keep = other[np.arange(len(own)), first]
+            sources.append(own[keep])
+            targets.append(index[np.arange(len(own)), first][keep].astype(np.int64))
+        return _Pairs(
+            np.concatenate(sources) if sources else empty,
+            np.concatenate(targets) if targets else empty,
+            cross_error,
+        )
+
+    # -- residuals ---------------------------------------------------------------------------
+
+    def residuals(self, pairs: _Pairs, placed: _Placed) -> NDArray[np.float64]:
+        """(n, 3) point-to-point or (n, 1) point-to-plane residuals, metres."""
+        difference = placed.source_G[pairs.source] - placed.reference_G[pairs.target]
+        if self.config.residual == "point_to_plane":
+            normals = placed.normals_G[pairs.target]
+            result: NDArray[np.float64] = np.einsum("ni,ni->n", normals, difference)[:, None]
+            return result
+        return difference
+
+    def cost(
+        self,
+        pairs: _Pairs,
+        T_G_ref: NDArray[np.float64],
+        T_ref_lidar: NDArray[np.float64],
+        scale: float,
+    ) -> float:
+        residual = self.residuals(pairs, self.place(T_G_ref, T_ref_lidar))
+        _, cost = robust_weight_and_cost(
+            np.linalg.norm(residual, axis=1), scale, self.config.robust_loss
+        )
+        floor_cost = 0.0
+        if self.floor:
+            floor_residual, _ = self._floor_terms(T_G_ref, T_ref_lidar, jacobians=False)
+            floor_cost = 0.5 * float(np.sum(floor_residual**2))
+        return float(np.sum(cost)) / self.config.point_sigma_m**2 + floor_cost
+
+    def _floor_terms(
+        self, T_G_ref: NDArray[np.float64], T_ref_lidar: NDArray[np.float64], *, jacobians: bool
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Whitened floor residuals (K, 3) and, if asked, their Jacobians (K, 3, P)."""
+        assert self.floor_G is not None
+        normal_G, offset_G = self.floor_G.normal, self.floor_G.offset
+        tangent = tangent_basis(normal_G)
+        residual = np.empty((len(self.floor), 3))
+        jac = np.zeros((len(self.floor), 3, self.layout.size if jacobians else 0))
+        for row, (lidar, stop, plane) in enumerate(self.floor):
+            normal, offset = plane_in_parent(plane, T_G_ref[stop] @ T_ref_lidar[lidar])
+            residual[row, :2] = tangent.T @ (normal - normal_G)
+            residual[row, 2] = offset - offset_G
+            if not jacobians:
+                continue
+            d_twist = np.zeros((3, 6))
+            d_twist[:2, 3:] = -tangent.T @ _hat_batch(normal[None])[0]
+            d_twist[2, :3] = -normal
+            if (col := self.layout.stop(stop)) >= 0:
+                jac[row, :, col : col + 6] = d_twist
+            if (col := self.layout.lidar(lidar)) >= 0:
+                jac[row, :, col : col + 6] = d_twist @ adjoint(T_G_ref[stop])
+        return residual / self.floor_sigma, jac / self.floor_sigma[None, :, None]
+
+    # -- normal equations --------------------------------------------------------------------
+
+    def normal_equations(
+        self,
+        pairs: _Pairs,
+        T_G_ref: NDArray[np.float64],
+        T_ref_lidar: NDArray[np.float64],
+        scale: float,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, int]:
+        """H = J^T W J, b = J^T W r (weights in 1/sigma^2), the weighted squared residual sum
+        and the number of residual rows."""
+        layout = self.layout
+        H = np.zeros((layout.size, layout.size))
+        b = np.zeros(layout.size)
+        placed = self.place(T_G_ref, T_ref_lidar)
+        # Rows grouped by (source cloud, target stop): within a group the three poses involved
+        # are the same, so one small GEMM gives the group's contribution.
+        slice_of = np.searchsorted(self.source_starts, pairs.source, side="right") - 1
+        target_stop = self.reference.stop[pairs.target]
+        key = slice_of * layout.n_stops + target_stop
+        order = np.argsort(key, kind="stable")
+        src, tgt, key = pairs.source[order], pairs.target[order], key[order]
+        sorted_pairs = _Pairs(src, tgt, pairs.cross_error)
+        residual = self.residuals(sorted_pairs, placed)
+        weight, _ = robust_weight_and_cost(
+            np.linalg.norm(residual, axis=1), scale, self.config.robust_loss
+        )
+        weight = weight / self.config.point_sigma_m**2
+        g, q, m = placed.source_G[src], placed.source_ref[src], placed.reference_G[tgt]
+        R_stop = T_G_ref[self.sources.stop[src]][:, :3, :3]
+        n, rows = residual.shape
+        jac = np.empty((n, rows, 18))
+        if self.config.residual == "point_to_plane":
+            n_G = placed.normals_G[tgt]
+            n_ref = np.einsum("nji,nj->ni", R_stop, n_G)  # the normal in the reference frame
+            jac[:, 0, 0:3] = n_G
+            jac[:, 0, 3:6] = np.cross(g, n_G)
+            jac[:, 0, 6:9] = n_ref
+            jac[:, 0, 9:12] = np.cross(q, n_ref)
+            jac[:, 0, 12:15] = -n_G
+            # The target's normal turns with its stop too: d(n.(g - m))/d(phi_k).
+            jac[:, 0, 15:18] = -np.cross(m, n_G) + np.cross(n_G, g - m)
+        else:
+            eye = np.broadcast_to(np.eye(3), (n, 3, 3))
+            jac[:, :, 0:3] = eye
+            jac[:, :, 3:6] = -_hat_batch(g)
+            jac[:, :, 6:9] = R_stop
+            jac[:, :, 9:12] = -R_stop @ _hat_batch(q)
+            jac[:, :, 12:15] = -eye
+            jac[:, :, 15:18] = _hat_batch(m)
+        weighted = jac * weight[:, None, None]
+        starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if n else np.zeros(0, np.int64)
+        ends = np.r_[starts[1:], n]
+        for a, b_end in zip(starts, ends, strict=True):
+            group = int(key[a])
+            lidar, j, *_ = self.sources.slices[group // layout.n_stops]
+            k = group % layout.n_stops
+            block, wblock = jac[a:b_end], weighted[a:b_end]
+            columns = [layout.stop(j), layout.lidar(lidar), layout.stop(k)]
+            if k == j:
+                # The source and the target move with the same stop pose: one block.
+                block = np.concatenate([block[..., 0:6] + block[..., 12:18], block[..., 6:12]], 2)
+                wblock = np.concatenate(
+                    [wblock[..., 0:6] + wblock[..., 12:18], wblock[..., 6:12]], 2
+                )
+                columns = columns[:2]
+            index = np.concatenate(
+                [np.arange(c, c + 6) if c >= 0 else np.full(6, -1) for c in columns]
+            )
+            used = index >= 0
+            if not used.any():
+                continue
+            flat = block.reshape(-1, block.shape[2])[:, used]
+            wflat = wblock.reshape(-1, block.shape[2])[:, used]
+            cols = index[used]
+            H[np.ix_(cols, cols)] += wflat.T @ flat
+            b[cols] += wflat.T @ residual[a:b_end].reshape(-1)
+        chi2 = float(np.sum(weight[:, None] * residual**2))
+        count = residual.size
+        if self.floor:
+            floor_residual, floor_jac = self._floor_terms(T_G_ref, T_ref_lidar, jacobians=True)
+            H += np.einsum("kri,krj->ij", floor_jac, floor_jac)
+            b += np.einsum("kri,kr->i", floor_jac, floor_residual)
+            chi2 += float(np.sum(floor_residual**2))
+            count += floor_residual.size
+        return H, b, chi2, count
+
+
+def _apply_step(
+    step: NDArray[np.float64],
+    layout: ParameterLayout,
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    new_stops, new_lidars = T_G_ref.copy(), T_ref_lidar.copy()
+    for j in range(1, layout.n_stops):
+        c = layout.stop(j)
+        new_stops[j] = exp_se3(step[c : c + 6]) @ T_G_ref[j]
+    for i in range(1, layout.n_lidars):
+        c = layout.lidar(i)
+        new_lidars[i] = exp_se3(step[c : c + 6]) @ T_ref_lidar[i]
+    return new_stops, new_lidars
+
+
+def _largest_motion(before: NDArray[np.float64], after: NDArray[np.float64]) -> tuple[float, float]:
+    """Largest translation (m) and rotation (deg) between matching poses of two (N, 4, 4) stacks."""
+    delta = np.linalg.inv(before) @ after
+    translation = float(np.max(np.linalg.norm(after[:, :3, 3] - before[:, :3, 3], axis=1)))
+    cos = np.clip((np.trace(delta[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1, 1)
+    return translation, float(np.degrees(np.max(np.arccos(cos))))
+
+
+def optimise(
+    objects: Sequence[Sequence[Points]],
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    config: OptimisationConfig,
+    *,
+    planes: Sequence[Sequence[Plane | None]] | None = None,
+    floor_G: Plane | None = None,
+    normals: Sequence[Sequence[Points]] | None = None,
+) -> OptimisationResult:
+    """Refine the poses so every LiDAR's object map agrees with the reference LiDAR's.
+
+    `objects[lidar][stop]`: (N, 3) object points in that LiDAR's frame; LiDAR 0 is the reference.
+    `T_G_ref` (J, 4, 4): the reference's pose per stop (stop 0 fixed). `T_ref_lidar` (L, 4, 4):
+    extrinsics relative to the reference (index 0 is the identity, fixed). `planes[lidar][stop]`
+    and `floor_G` (stage 3) add the floor terms; without them only the objects count.
+    `normals[lidar][stop]` (N, 3): the points' surface normals when the caller has them
+    (segmentation does); without them they are fitted here, and the clouds smoothed if
+    `smooth_clouds`.
+    """
+    started = time.perf_counter()
+    problem = _Problem(objects, planes, floor_G, len(T_G_ref), config, normals)
+    layout = problem.layout
+    stops = np.array(T_G_ref, dtype=np.float64)
+    lidars = np.array(T_ref_lidar, dtype=np.float64)
+    history = [lidars.copy()]
+    errors: list[float] = []
+    damping = config.initial_damping
+    converged, iteration = False, 0
+    pairs = problem.associate(problem.place(stops, lidars))
+    scale = config.kernel_scale_min_m
+    H = np.zeros((layout.size, layout.size))
+    chi2, count = 0.0, 0
+    for iteration in range(1, config.max_iterations + 1):
+        errors.append(pairs.cross_error)
+        # Graduated robustness: wide at first, while everything is far off, then tight so that
+        # parts one LiDAR saw and the reference did not stop pulling.
+        scale = max(
+            config.kernel_scale_min_m,
+            config.kernel_scale_initial_m * config.kernel_scale_decay ** (iteration - 1),
+        )
+        H, b, chi2, count = problem.normal_equations(pairs, stops, lidars, scale)
+        cost = problem.cost(pairs, stops, lidars, scale)
+        # A pose nothing constrains (no objects, no floor) keeps its value instead of a
+        # singular solve; the observability stage reports it.
+        floor = 1e-12 * max(float(np.trace(H)) / max(layout.size, 1), 1.0)
+        accepted = False
+        for _ in range(10):
+            A = H + damping * np.diag(np.diag(H)) + floor * np.eye(layout.size)
+            step = np.asarray(-np.linalg.solve(A, b), dtype=np.float64)
+            trial_stops, trial_lidars = _apply_step(step, layout, stops, lidars)
+            if problem.cost(pairs, trial_stops, trial_lidars, scale) <= cost:
+                accepted = True
+                damping = max(damping / 3.0, 1e-9)
+                break
+            damping = max(damping * 4.0, 1e-6)
+        translation = rotation = 0.0
+        if accepted:
+            stop_motion = _largest_motion(stops, trial_stops)
+            lidar_motion = _largest_motion(lidars, trial_lidars)
+            translation = max(stop_motion[0], lidar_motion[0])
+            rotation = max(stop_motion[1], lidar_motion[1])
+            stops, lidars = trial_stops, trial_lidars
+        history.append(lidars.copy())
+        new_pairs = problem.associate(problem.place(stops, lidars))
+        if not accepted or (
+            translation < config.translation_tolerance_m
+            and rotation < config.rotation_tolerance_deg
+        ):
+            converged = True
+            pairs = new_pairs
+            break
+        pairs = new_pairs
+    errors.append(pairs.cross_error)
+    # The information matrix and the variance factor at the solution, with its associations.
+    if len(pairs.source) or problem.floor:
+        H, _, chi2, count = problem.normal_equations(pairs, stops, lidars, scale)
+    redundancy = max(count - layout.size, 1)
+    residual_rms = float("nan")
+    if len(pairs.source):
+        residual = problem.residuals(pairs, problem.place(stops, lidars))
+        residual_rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
+    per_lidar = np.bincount(problem.sources.lidar[pairs.source], minlength=layout.n_lidars).astype(
+        int
+    )
+    return OptimisationResult(
+        T_G_ref=stops,
+        T_ref_lidar=lidars,
+        converged=converged,
+        iterations=iteration,
+        error_per_iteration=tuple(errors),
+        T_ref_lidar_per_iteration=np.stack(history),
+        information=H,
+        variance_factor=chi2 / redundancy,
+        layout=layout,
+        correspondences=tuple(int(c) for c in per_lidar),
+        residual_rms_m=residual_rms,
+        seconds=time.perf_counter() - started,
+    )

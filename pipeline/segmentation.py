@@ -1,0 +1,229 @@
+"""Stage 2: split one accumulated LiDAR cloud into its floor plane and its object points.
+
+Floor: RANSAC plane among planes tilted at most `max_floor_tilt_deg` from the expected up
+direction, refined by least squares on its inliers. Objects: the points clearly above the floor,
+grouped by Euclidean clustering (radius graph, connected components); small clusters are dropped.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from pipeline.surfaces import local_planes
+from pipeline.transforms import Points
+
+_FROZEN = ConfigDict(frozen=True, extra="forbid")
+
+
+class SegmentationConfig(BaseModel):
+    """Floor RANSAC and Euclidean clustering; lengths in metres."""
+
+    model_config = _FROZEN
+
+    floor_distance_m: float = Field(
+        default=0.02, gt=0, description="RANSAC inlier band around the floor"
+    )
+    ransac_iterations: int = Field(default=300, ge=1)
+    ransac_scored_points: int = Field(
+        default=4000,
+        ge=10,
+        description="hypotheses are scored on this many random points of the cloud",
+    )
+    max_floor_tilt_deg: float = Field(
+        default=30.0,
+        gt=0,
+        le=90,
+        description="floor normal vs the up direction of the initial extrinsics",
+    )
+    min_floor_points: int = Field(
+        default=200, ge=3, description="fewer inliers: no floor in this cloud"
+    )
+    object_min_height_m: float = Field(
+        default=0.06,
+        ge=0,
+        description="object points lie at least this far above the floor plane; lower, the floor's "
+        "range noise grows skirts round the objects that differ from one viewpoint to the next",
+    )
+    cluster_radius_m: float = Field(
+        default=0.06, gt=0, description="Euclidean clustering tolerance"
+    )
+    min_cluster_points: int = Field(
+        default=30, ge=1, description="smaller clusters are dropped as noise"
+    )
+    surface_neighbours: int = Field(
+        default=30, ge=3, description="neighbours whose plane gives an object point's normal"
+    )
+    min_incidence_cos: float = Field(
+        default=0.12,
+        ge=0,
+        lt=1,
+        description="object points whose surface the beam meets more edge-on than this (|cos| of "
+        "beam vs normal) are dropped: bleeding points trail behind edges as sheets that contain "
+        "the beam",
+    )
+    smooth_objects: bool = Field(
+        default=True, description="object points are projected onto their local plane (range noise)"
+    )
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Plane:
+    """`normal . p + offset = 0` for points `p` on the plane; `normal` (3,) is unit and points up,
+    so `offset` > 0 is the height of the frame's origin above the plane."""
+
+    normal: NDArray[np.float64]
+    offset: float
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """One cloud split into floor and objects, all (N, 3) in the LiDAR frame.
+
+    `object_normals` (N, 3): the unit normal of each object point's local surface.
+
+    `floor` is None when no plane with `min_floor_points` inliers was found. `floor_rms_m` is the
+    RMS distance of the floor inliers to the refined plane (NaN without floor).
+    """
+
+    floor: Plane | None
+    floor_points: Points
+    object_points: Points
+    object_normals: Points
+    cluster_count: int
+    input_points: int
+    floor_rms_m: float
+    seconds: float
+
+
+def fit_plane(points: Points) -> tuple[NDArray[np.float64], float, float]:
+    """Least-squares plane through (N >= 3, 3) points: unit normal (sign arbitrary), offset, RMS."""
+    centroid = points.mean(axis=0)
+    centred = points - centroid
+    _, singular, vt = np.linalg.svd(centred.T @ centred)
+    normal = vt[2]
+    rms = float(np.sqrt(max(singular[2], 0.0) / len(points)))
+    return normal, float(-normal @ centroid), rms
+
+
+def find_floor(
+    points: Points,
+    up: NDArray[np.float64],
+    *,
+    distance_m: float,
+    iterations: int,
+    scored_points: int,
+    max_tilt_deg: float,
+    min_points: int,
+    rng: np.random.Generator,
+) -> tuple[Plane, NDArray[np.bool_], float] | None:
+    """RANSAC for the plane with most inliers whose normal is within `max_tilt_deg` of `up` (3,).
+
+    Returns the refined plane (normal oriented along `up`), the inlier mask over `points` and the
+    inliers' RMS distance; None when no such plane has `min_points` inliers.
+    """
+    n = len(points)
+    if n < max(3, min_points):
+        return None
+    samples = points[rng.integers(0, n, size=(iterations, 3))]
+    normals = np.cross(samples[:, 1] - samples[:, 0], samples[:, 2] - samples[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    valid = lengths > 1e-12
+    normals = normals[valid] / lengths[valid, None]
+    normals *= np.sign(normals @ up)[:, None]
+    tilted = normals @ up >= np.cos(np.radians(max_tilt_deg))
+    normals = normals[tilted]
+    if len(normals) == 0:
+        return None
+    offsets = -np.einsum("ij,ij->i", normals, samples[valid][tilted, 0])
+    scored = points[rng.choice(n, size=min(n, scored_points), replace=False)]
+    counts = (np.abs(scored @ normals.T + offsets) < distance_m).sum(axis=0)
+    best = int(np.argmax(counts))
+    inliers = np.abs(points @ normals[best] + offsets[best]) < distance_m
+    # Two least-squares refits: the first moves the band onto the true floor, the second uses it.
+    for _ in range(2):
+        if inliers.sum() < max(3, min_points):
+            return None
+        normal, offset, _ = fit_plane(points[inliers])
+        if normal @ up < 0:
+            normal, offset = -normal, -offset
+        inliers = np.abs(points @ normal + offset) < distance_m
+    if inliers.sum() < max(3, min_points) or normal @ up < np.cos(np.radians(max_tilt_deg)):
+        return None
+    rms = float(np.sqrt(np.mean((points[inliers] @ normal + offset) ** 2)))
+    return Plane(normal=normal, offset=offset), inliers, rms
+
+
+def euclidean_clusters(points: Points, radius: float) -> NDArray[np.int64]:
+    """Label (N,) of each point's cluster: points closer than `radius` share a cluster."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=np.int64)
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    graph = coo_matrix(
+        (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])),
+        shape=(len(points), len(points)),
+    )
+    _, labels = connected_components(graph, directed=False)
+    result: NDArray[np.int64] = labels.astype(np.int64)
+    return result
+
+
+def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig) -> Segmentation:
+    """Split (N, 3) points of one LiDAR at one stop into floor and objects, in the LiDAR frame.
+
+    `up` (3,) is the expected floor normal in the LiDAR frame (base z through the initial
+    extrinsics); it picks the floor among planes and orients its normal.
+    """
+    started = time.perf_counter()
+    cloud = np.asarray(points, dtype=np.float64)
+    up = np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
+    found = find_floor(
+        cloud,
+        up,
+        distance_m=config.floor_distance_m,
+        iterations=config.ransac_iterations,
+        scored_points=config.ransac_scored_points,
+        max_tilt_deg=config.max_floor_tilt_deg,
+        min_points=config.min_floor_points,
+        rng=np.random.default_rng(config.seed),
+    )
+    if found is None:
+        # Objects are what stands on the floor: without a floor nothing can be told apart from it.
+        floor, floor_mask, rms = None, np.zeros(len(cloud), dtype=bool), float("nan")
+        candidates = cloud[:0]
+    else:
+        floor, floor_mask, rms = found
+        height = cloud @ floor.normal + floor.offset
+        candidates = cloud[height > config.object_min_height_m]
+    labels = euclidean_clusters(candidates, config.cluster_radius_m)
+    sizes = np.bincount(labels) if len(labels) else np.zeros(0, dtype=np.int64)
+    kept = sizes >= config.min_cluster_points
+    objects = candidates[kept[labels]] if len(labels) else candidates
+    normals = np.zeros((0, 3))
+    if len(objects) >= 3:
+        projected, normals = local_planes(objects, config.surface_neighbours)
+        # The sensor sits at the origin: the beam to p is p / |p|.
+        cos = np.abs(np.einsum("ni,ni->n", normals, objects)) / np.linalg.norm(objects, axis=1)
+        seen = cos >= config.min_incidence_cos
+        objects = (projected if config.smooth_objects else objects)[seen]
+        normals = normals[seen]
+    else:
+        objects = objects[:0]
+    return Segmentation(
+        floor=floor,
+        floor_points=cloud[floor_mask],
+        object_points=objects,
+        object_normals=normals,
+        cluster_count=int(kept.sum()),
+        input_points=len(points),
+        floor_rms_m=rms,
+        seconds=time.perf_counter() - started,
+    )
