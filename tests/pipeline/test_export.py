@@ -7,6 +7,7 @@ import copy
 import math
 import shlex
 import xml.etree.ElementTree as ET
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from pipeline.export import (
     tf_static_launch,
     urdf_snippet,
 )
+from pipeline.io import read_recording
 from pipeline.transforms import from_translation_xyzw, from_xyz_rpy
 
 TOLERANCE = 1e-9
@@ -70,6 +72,14 @@ def expected(doc: dict[str, Any]) -> dict[tuple[str, str], np.ndarray]:
         )
         for frame, e in doc["lidars"].items()
     }
+
+
+def assert_recording_has(path: Path, doc: dict[str, Any]) -> None:
+    """The recording at `path` reads back (`read_recording`) with the result's extrinsics."""
+    problem = read_recording(path)
+    assert_same(
+        {(problem.base_frame, lidar.frame): lidar.T_base_lidar for lidar in problem.lidars}, doc
+    )
 
 
 def assert_same(parsed: dict[tuple[str, str], np.ndarray], doc: dict[str, Any]) -> None:
