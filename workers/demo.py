@@ -243,6 +243,10 @@ def extrinsics_table(result: dict[str, Any], truth: Truth) -> list[str]:
 def _serve_on(url: str, run_id: str, admin_key: str | None, robot_key: str) -> None:
     typer.echo("")
     typer.echo(f"The service keeps running at {url} (API docs: {url}/docs); Ctrl-C stops it.")
+    typer.echo(
+        f"  the dashboard:    {url}/#/runs/{run_id} (sign in with the admin key, or a key from "
+        "`fleetcal keys create --scope read`)"
+    )
     typer.echo(f"  the run:          curl -H 'X-API-Key: {robot_key}' {url}/v1/runs/{run_id}")
     typer.echo(
         f"  the calibration:  curl -H 'X-API-Key: {robot_key}' "
