@@ -50,7 +50,20 @@ READ_ERRORS: tuple[type[BaseException], ...] = (
     EOFError,
     OSError,
     RuntimeError,  # lz4 frame errors in ROS 1 chunks
+    UnicodeDecodeError,  # damaged names and definitions
 )
+# Damaged bytes also reach paths rosbags does not guard: its consistency asserts, a length field
+# asking for an absurd read (MemoryError, OverflowError), lookups of ids that do not exist. These
+# count as damage only when rosbags itself raised them; from our own code they stay bugs.
+_BACKEND_ERRORS: tuple[type[BaseException], ...] = (
+    AssertionError,
+    MemoryError,
+    OverflowError,
+    ValueError,
+    IndexError,
+    KeyError,
+)
+_TRANSLATED = READ_ERRORS + _BACKEND_ERRORS
 
 
 class OpenRecording:
@@ -120,15 +133,31 @@ def reading_errors(path: Path, storage: RecordingFormat) -> Iterator[None]:
         yield
     except RecordingError:
         raise
-    except READ_ERRORS as err:
-        remedy = {
-            RecordingFormat.ROS1: "run `rosbag reindex` on it, or copy it again",
-            RecordingFormat.SQLITE3: "copy it again; a damaged sqlite3 bag cannot be repaired here",
-        }.get(storage, "copy it again, or repair it with `ros2 bag reindex` / `mcap recover`")
+    except _TRANSLATED as err:
+        if not isinstance(err, READ_ERRORS) and not _raised_by_backend(err):
+            raise
         raise CorruptRecordingError(
             f"{path} looks like a {storage.value} recording but cannot be read ({_cause(err)}); "
-            f"it is truncated or damaged: {remedy}"
+            f"it is truncated or damaged: {_remedy(storage)}"
         ) from err
+
+
+def _remedy(storage: RecordingFormat) -> str:
+    return {
+        RecordingFormat.ROS1: "run `rosbag reindex` on it, or copy it again",
+        RecordingFormat.SQLITE3: "copy it again; a damaged sqlite3 bag cannot be repaired here",
+    }.get(storage, "copy it again, or repair it with `ros2 bag reindex` / `mcap recover`")
+
+
+def _raised_by_backend(err: BaseException) -> bool:
+    """Whether the innermost Python frame of `err` is in rosbags (or code it generated)."""
+    tb = err.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    if tb is None:
+        return False
+    filename = tb.tb_frame.f_code.co_filename
+    return "rosbags" in Path(filename).parts or not filename.endswith(".py")
 
 
 @contextmanager
@@ -184,6 +213,14 @@ def open_recording(
                 reader.open()
                 stack.callback(reader.close)
                 readers.append(reader)
+        for connection in (c for reader in readers for c in reader.connections):
+            # A damaged sqlite3 bag can hand back NULL topics or types.
+            if not isinstance(connection.topic, str) or not isinstance(connection.msgtype, str):
+                raise CorruptRecordingError(
+                    f"{path} has a connection without a topic or message type "
+                    f"({connection.topic!r}, {connection.msgtype!r}); it is damaged: "
+                    f"{_remedy(storage)}"
+                )
         yield OpenRecording(path, fmt, storage, readers)
 
 
