@@ -230,7 +230,7 @@ def list_runs(
             final,
         )
         for id_, robot_id, kind, status, attempts, created, started, finished, passed, final in (
-            session.execute(stmt)
+            session.connection().execute(stmt).all()
         )
     ]
 
@@ -396,8 +396,9 @@ _POINT_COLUMNS = (
 def _points(session: Session, stmt: Any) -> list[ExtrinsicPoint]:
     return [
         ExtrinsicPoint(id_, run_id, frame, at, passed, ref, (tx, ty, tz), (qx, qy, qz, qw), sd)
-        for id_, run_id, frame, at, passed, ref, tx, ty, tz, qx, qy, qz, qw, sd in session.execute(
-            stmt
+        for id_, run_id, frame, at, passed, ref, tx, ty, tz, qx, qy, qz, qw, sd in (
+            # Columns only: the Core connection skips the ORM's row loading, a third of the cost.
+            session.connection().execute(stmt).all()
         )
     ]
 

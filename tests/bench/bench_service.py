@@ -13,7 +13,8 @@ uvicorn uses httptools and uvloop when installed (`uvicorn[standard]`); h11 alon
 about a third of the speed. Queries:
 the database is seeded directly (bulk inserts: runs, results with a realistic result.json, two
 extrinsics rows per result), then each query is timed end to end over HTTP; p50/p95 over
-`--requests` calls on random robots. Prints markdown tables; the load average is printed too.
+`--requests` calls on random robots, with the server's CPU time per request (what the query costs
+whatever the machine's load). Prints markdown tables; the load average is printed too.
 """
 
 from __future__ import annotations
@@ -390,13 +391,15 @@ def bench_queries(
         cursor = first_page["next_cursor"]
         for name, template in QUERIES.items():
             timings, items = [], []
-            for index in range(requests + 10):
+            for _ in range(10):  # warm-up calls are not counted
+                get(template.format(robot=rng.choice(robots), cursor=cursor))
+            cpu_before = api.cpu_seconds()
+            for _ in range(requests):
                 path = template.format(robot=rng.choice(robots), cursor=cursor)
                 elapsed, body = get(path)
-                if index >= 10:  # warm-up calls are not counted
-                    timings.append(elapsed * 1000)
-                    parsed = json.loads(body)
-                    items.append(len(parsed.get("items", [1])))
+                timings.append(elapsed * 1000)
+                items.append(len(json.loads(body).get("items", [1])))
+            server_cpu_ms = (api.cpu_seconds() - cpu_before) * 1000 / requests
             timings.sort()
             rows.append(
                 {
@@ -406,6 +409,7 @@ def bench_queries(
                     "p50 ms": f"{timings[len(timings) // 2]:.1f}",
                     "p95 ms": f"{timings[int(len(timings) * 0.95) - 1]:.1f}",
                     "max ms": f"{timings[-1]:.1f}",
+                    "server CPU ms/req": f"{server_cpu_ms:.1f}",
                 }
             )
     return rows
