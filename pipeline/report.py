@@ -43,6 +43,10 @@ reference first) gets colour i, in these images and on the dashboard."""
 
 _OBJECT_MIN_HEIGHT_M = 0.05
 _DPI = 100
+# Density pixels per panel: about one per screen pixel of the 14-inch-wide figures at 100 dpi.
+_TOP_PIXELS = 560
+_SIDE_COLS, _SIDE_ROWS = 1200, 220
+_MIN_CELL_M = 0.02
 
 
 def lidar_colour(index: int) -> str:
@@ -90,7 +94,7 @@ def report_input(
     problem: CalibrationProblem,
     result: CalibrationResult,
     *,
-    max_points: int = 150_000,
+    max_points: int = 400_000,
     seed: int = 0,
 ) -> ReportInput:
     """The images' data for `result`, calibrated from `problem`; at most about `max_points`
@@ -146,9 +150,10 @@ def render(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[str,
     floor_z = floor_height(np.concatenate(after)) if any(len(p) for p in after) else 0.0
     # One classification for both maps (from the calibrated one), so both show the same points.
     objects = [p[:, 2] > floor_z + _OBJECT_MIN_HEIGHT_M for p in after]
+    x0, x1, _, _ = _top_extent([p[m, :2] for p, m in zip(after, objects, strict=True)])
     figures = {
         "map-top": lambda: _top_view(data, before, after, objects),
-        "map-side": lambda: _side_view(data, before, after),
+        "map-side": lambda: _side_view(data, before, after, (x0, x1), floor_z),
         "error": lambda: _error_curve(data),
     }
     return {name: _png(figures[name]()) for name in REPORT_IMAGES if name in names}
@@ -180,28 +185,99 @@ def _png(figure: Figure) -> bytes:
     return buffer.getvalue()
 
 
-def _scatter(
-    axes: Axes, frames: Sequence[str], layers: Sequence[NDArray[np.float64]], size: float
-) -> None:
-    """Every LiDAR's (N, 2) points in its colour, drawn interleaved so none hides another."""
-    points = np.concatenate([p for p in layers if len(p)] or [np.zeros((0, 2))])
-    colours = np.concatenate(
-        [np.full(len(p), i) for i, p in enumerate(layers)] or [np.zeros(0)]
-    ).astype(int)
-    order = np.random.default_rng(1).permutation(len(points))
-    palette = np.array([lidar_colour(i) for i in range(len(frames))])
-    axes.scatter(
-        points[order, 0],
-        points[order, 1],
-        s=size,
-        c=palette[colours[order]] if len(points) else [],
-        marker=".",
-        linewidths=0,
-        alpha=0.8,
-        rasterized=True,
+Extent = tuple[float, float, float, float]
+"""(x0, x1, y0, y1) of a panel, metres."""
+
+
+def _density_image(
+    layers: Sequence[NDArray[np.float64]], extent: Extent, cols: int, rows: int
+) -> NDArray[np.float64]:
+    """(rows, cols, 3) RGB in [0, 1]: each LiDAR's (N, 2) points as a density in its colour.
+
+    Opacity grows with the log of the points per pixel, so dense surfaces show strongly and
+    stray points faintly. LiDARs mix like inks (multiplied), order-free: where they agree the
+    colours darken together; where they disagree each stands apart in its own colour.
+    """
+    x0, x1, y0, y1 = extent
+    image = np.ones((rows, cols, 3))
+    for i, points in enumerate(layers):
+        if not len(points):
+            continue
+        counts, _, _ = np.histogram2d(
+            points[:, 1], points[:, 0], bins=(rows, cols), range=((y0, y1), (x0, x1))
+        )
+        occupied = counts[counts > 0]
+        if not len(occupied):
+            continue
+        # Relative to the well-filled pixels: a lone point is faint in a dense map, and still
+        # visible in a sparse one.
+        full = np.log1p(max(float(np.percentile(occupied, 95)), 2.0))
+        alpha = np.clip(np.log1p(counts) / full, 0.0, 1.0)
+        ink = 1.0 - np.asarray(_rgb(lidar_colour(i)))
+        image *= 1.0 - alpha[..., None] * ink
+    return image
+
+
+def _rgb(colour: str) -> tuple[float, float, float]:
+    return (
+        int(colour[1:3], 16) / 255,
+        int(colour[3:5], 16) / 255,
+        int(colour[5:7], 16) / 255,
     )
-    for i, frame in enumerate(frames):
-        axes.scatter([], [], s=40, c=lidar_colour(i), label=frame + (" (reference)" * (i == 0)))
+
+
+def _draw(
+    axes: Axes, layers: Sequence[NDArray[np.float64]], extent: Extent, cols: int, rows: int
+) -> None:
+    axes.imshow(
+        _density_image(layers, extent, cols, rows),
+        extent=extent,
+        origin="lower",
+        interpolation="nearest",
+        aspect="auto",
+    )
+    axes.set_xlim(extent[0], extent[1])
+    axes.set_ylim(extent[2], extent[3])
+
+
+def _legend(axes: Axes, frames: Sequence[str]) -> None:
+    from matplotlib.patches import Patch
+
+    handles = [
+        Patch(color=lidar_colour(i), label=frame + (" (reference)" if i == 0 else ""))
+        for i, frame in enumerate(frames)
+    ]
+    if len(frames) > 1:
+        both = np.prod([_rgb(lidar_colour(i)) for i in range(len(frames))], axis=0)
+        handles.append(Patch(color=tuple(both), label="LiDARs overlapping"))
+    axes.legend(handles=handles, loc="upper right", framealpha=0.9)
+
+
+def _dense_extent(
+    points: NDArray[np.float64], cell_m: float, margin_m: float, fallback: Extent
+) -> Extent:
+    """The box around where (N, 2) points are dense (cells holding at least 2 % of the fullest
+    cell), plus a margin: stray far returns must not shrink the structure to a dot."""
+    if len(points) < 10:
+        return fallback
+    low = np.percentile(points, 0.1, axis=0)
+    high = np.percentile(points, 99.9, axis=0)
+    bins = np.maximum(1, np.ceil((high - low) / cell_m)).astype(int)
+    counts, xs, ys = np.histogram2d(
+        points[:, 0],
+        points[:, 1],
+        bins=(int(bins[0]), int(bins[1])),
+        range=list(zip(low, high, strict=True)),
+    )
+    ix, iy = np.nonzero(counts >= max(2.0, 0.02 * counts.max()))
+    if not len(ix):
+        return fallback
+    return (
+        float(xs[ix.min()]) - margin_m,
+        float(xs[ix.max() + 1]) + margin_m,
+        float(ys[iy.min()]) - margin_m,
+        float(ys[iy.max() + 1]) + margin_m,
+    )
 
 
 def _panel_titles(data: ReportInput) -> tuple[str, str]:
@@ -212,47 +288,71 @@ def _panel_titles(data: ReportInput) -> tuple[str, str]:
     )
 
 
+def _top_extent(after_objects: Sequence[NDArray[np.float64]]) -> Extent:
+    """A square around the calibrated map's objects."""
+    points = np.concatenate([p for p in after_objects if len(p)] or [np.zeros((0, 2))])
+    x0, x1, y0, y1 = _dense_extent(points, cell_m=0.1, margin_m=0.5, fallback=(-5, 5, -5, 5))
+    half = max(x1 - x0, y1 - y0) / 2
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    return (cx - half, cx + half, cy - half, cy + half)
+
+
 def _top_view(
     data: ReportInput, before: list[Points], after: list[Points], objects: list[NDArray[np.bool_]]
 ) -> Figure:
-    figure = _figure(14, 7)
+    figure = _figure(14, 7.8)
     panels = figure.subplots(1, 2, sharex=True, sharey=True)
     shown_after = [p[m, :2] for p, m in zip(after, objects, strict=True)]
     shown_before = [p[m, :2] for p, m in zip(before, objects, strict=True)]
+    extent = _top_extent(shown_after)
+    # Cells of 2 cm at least (the segmentation's voxel): sparse clouds still show surfaces.
+    cells = int(min(_TOP_PIXELS, (extent[1] - extent[0]) / _MIN_CELL_M))
     for axes, layers, title in zip(
         panels, (shown_before, shown_after), _panel_titles(data), strict=True
     ):
-        _scatter(axes, data.frames, layers, size=4.0)
+        _draw(axes, layers, extent, cols=cells, rows=cells)
         axes.set_title(title)
         axes.set_aspect("equal", adjustable="box")
         axes.set_xlabel("x (m)")
-        axes.grid(True, alpha=0.3)
+        axes.grid(True, alpha=0.25)
     panels[0].set_ylabel("y (m)")
-    _limits(panels[1], np.concatenate(shown_after or [np.zeros((0, 2))]), margin=0.3)
-    panels[1].legend(loc="upper right", markerscale=1, framealpha=0.9)
+    _legend(panels[1], data.frames)
     figure.suptitle(
-        "Top view: object points of every stop (floor hidden), in the base frame of the first "
-        "stop. A mismatch shows each object twice."
+        "Top view: points above the floor from every stop, in the base frame of the first stop\n"
+        "A mismatch shows each object twice, once per colour; agreement darkens them together"
     )
     return figure
 
 
-def _side_view(data: ReportInput, before: list[Points], after: list[Points]) -> Figure:
-    figure = _figure(14, 6)
+def _side_view(
+    data: ReportInput,
+    before: list[Points],
+    after: list[Points],
+    x_range: tuple[float, float],
+    floor_z: float,
+) -> Figure:
+    figure = _figure(14, 6.4)
     panels = figure.subplots(2, 1, sharex=True, sharey=True)
+    x0, x1 = x_range
+    inside = [p[(p[:, 0] >= x0) & (p[:, 0] <= x1)] for p in after]
+    heights = np.concatenate([p[:, [0, 2]] for p in inside if len(p)] or [np.zeros((0, 2))])
+    top = _dense_extent(
+        heights, cell_m=0.05, margin_m=0.15, fallback=(x0, x1, floor_z, floor_z + 1)
+    )[3]
+    extent = (x0, x1, floor_z - 0.35, max(top, floor_z + 0.5))
+    cols = int(min(_SIDE_COLS, (x1 - x0) / _MIN_CELL_M))
+    # Heights are stretched on screen: finer cells in z keep the floor a thin line.
+    rows = int(min(_SIDE_ROWS, (extent[3] - extent[2]) / (_MIN_CELL_M / 2)))
     for axes, placed, title in zip(panels, (before, after), _panel_titles(data), strict=True):
-        _scatter(axes, data.frames, [p[:, [0, 2]] for p in placed], size=1.5)
+        _draw(axes, [p[:, [0, 2]] for p in placed], extent, cols=cols, rows=rows)
         axes.set_title(title)
         axes.set_ylabel("z (m)")
-        axes.grid(True, alpha=0.3)
+        axes.grid(True, alpha=0.25)
     panels[1].set_xlabel("x (m)")
-    # Limits from both maps: a badly tilted floor before calibration must stay in the picture.
-    everything = np.concatenate([p[:, [0, 2]] for p in (*before, *after)] or [np.zeros((0, 2))])
-    _limits(panels[1], everything, margin=0.2)
-    panels[1].legend(loc="upper right", framealpha=0.9)
+    _legend(panels[1], data.frames)
     figure.suptitle(
-        "Side view: all points of every stop, z stretched. A mismatch shows the floor at several "
-        "heights and tilts."
+        "Side view: all points of every stop, height stretched\n"
+        "A mismatch shows the floor and the objects at several heights and tilts"
     )
     return figure
 
@@ -292,16 +392,6 @@ def _error_curve(data: ReportInput) -> Figure:
         f"{_mm(data.metric_error_initial)} before, {_mm(data.metric_error_final)} after"
     )
     return figure
-
-
-def _limits(axes: Axes, points: NDArray[np.float64], margin: float) -> None:
-    """Axis limits holding 99 % of the points (a few far returns must not shrink the map)."""
-    if len(points) < 10:
-        return
-    low = np.percentile(points, 0.5, axis=0) - margin
-    high = np.percentile(points, 99.5, axis=0) + margin
-    axes.set_xlim(float(low[0]), float(high[0]))
-    axes.set_ylim(float(low[1]), float(high[1]))
 
 
 def _mm(value: float) -> str:
