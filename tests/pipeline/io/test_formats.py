@@ -20,9 +20,14 @@ def write_small(path: Path, fmt: WriterFormat) -> None:
 
 @pytest.mark.parametrize(
     ("fmt", "expected"),
-    [(WriterFormat.ROS2_MCAP, RecordingFormat.MCAP), (WriterFormat.ROS2_SQLITE3, RecordingFormat.SQLITE3)],
+    [
+        (WriterFormat.ROS2_MCAP, RecordingFormat.MCAP),
+        (WriterFormat.ROS2_SQLITE3, RecordingFormat.SQLITE3),
+    ],
 )
-def test_ros2_directory_and_its_storage_file(tmp_path: Path, fmt: WriterFormat, expected: RecordingFormat) -> None:
+def test_ros2_directory_and_its_storage_file(
+    tmp_path: Path, fmt: WriterFormat, expected: RecordingFormat
+) -> None:
     bag = tmp_path / "bag"
     write_small(bag, fmt)
     assert detect_format(bag) is RecordingFormat.ROS2_DIRECTORY
