@@ -1,7 +1,8 @@
-"""`CalibrationProblem`: what a recording gives the pipeline, with no trace of the file it came from.
+"""`CalibrationProblem`: what a recording gives the pipeline, free of the file it came from.
 
-Frames: `odom` is the odometry's fixed frame, `base` the robot body (`base_link`), each LiDAR its own
-frame. Clouds are in their LiDAR's frame; poses are named `T_parent_child` (see `transforms`).
+Frames: `odom` is the odometry's fixed frame, `base` the robot body (`base_link`), each LiDAR
+its own frame. Clouds are in their LiDAR's frame; poses are named `T_parent_child`
+(see `transforms`).
 """
 
 from __future__ import annotations

@@ -31,7 +31,10 @@ def from_translation_xyzw(translation: Sequence[float] | ArrayLike, xyzw: ArrayL
     quat = np.asarray(xyzw, dtype=np.float64)
     norm = float(np.linalg.norm(quat))
     if not np.isfinite(norm) or norm < 1e-9:
-        raise ValueError(f"quaternion {quat.tolist()} has no direction; expected [x, y, z, w] with w or xyz non-zero")
+        raise ValueError(
+            f"quaternion {quat.tolist()} has no direction; "
+            "expected [x, y, z, w] with w or xyz non-zero"
+        )
     return make_transform(Rotation.from_quat(quat / norm).as_matrix(), translation)
 
 
@@ -60,7 +63,7 @@ def apply(T: Matrix4, points: Points) -> Points:
 
 
 def exp_se3(xi: ArrayLike) -> Matrix4:
-    """`T` from a twist `xi = [rho (3), phi (3)]`: rotation vector `phi`, translation as in SE(3)'s exp."""
+    """`T` from a twist `xi = [rho (3), phi (3)]` (rotation vector `phi`), SE(3)'s exp map."""
     xi = np.asarray(xi, dtype=np.float64)
     rho, phi = xi[:3], xi[3:]
     theta = float(np.linalg.norm(phi))

@@ -14,7 +14,7 @@ class UnknownFormatError(RecordingError):
 
 
 class CorruptRecordingError(RecordingError):
-    """The file looks like a recording but cannot be decoded (truncated, damaged, unsafe archive)."""
+    """The file looks like a recording but cannot be decoded (truncated, damaged, unsafe)."""
 
 
 class NoPointCloudError(RecordingError):

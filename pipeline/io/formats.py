@@ -60,12 +60,15 @@ def detect_format(path: Path) -> RecordingFormat:
     if path.is_dir():
         # metadata.yaml also marks a bag whose storage files are compressed (.mcap.zstd).
         if (path / "metadata.yaml").is_file() or any(
-                _file_format(child) in (RecordingFormat.MCAP, RecordingFormat.SQLITE3)
-                for child in sorted(path.iterdir()) if child.is_file()):
+            _file_format(child) in (RecordingFormat.MCAP, RecordingFormat.SQLITE3)
+            for child in sorted(path.iterdir())
+            if child.is_file()
+        ):
             return RecordingFormat.ROS2_DIRECTORY
         raise UnknownFormatError(
             f"{path} is a directory without a ROS 2 bag in it (no .mcap or .db3 storage file); "
-            "pass a bag directory, a .mcap, .db3 or ROS 1 .bag file, or a .zip/.tar(.gz) of a bag directory"
+            "pass a bag directory, a .mcap, .db3 or ROS 1 .bag file, "
+            "or a .zip/.tar(.gz) of a bag directory"
         )
     if not path.exists():
         raise UnknownFormatError(f"{path} does not exist; check the path")
@@ -84,5 +87,7 @@ def _file_format(path: Path) -> RecordingFormat | None:
         with path.open("rb") as stream:
             head = stream.read(HEAD_BYTES)
     except OSError as err:
-        raise UnknownFormatError(f"cannot read {path}: {err.strerror}; check the path and permissions") from err
+        raise UnknownFormatError(
+            f"cannot read {path}: {err.strerror}; check the path and permissions"
+        ) from err
     return detect_format_from_head(head)

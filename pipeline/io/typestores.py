@@ -23,5 +23,7 @@ def ros1_typestore() -> Typestore:
     """ROS 1 Noetic types plus `tf2_msgs/msg/TFMessage`, which the stock ROS 1 store lacks."""
     store = get_typestore(Stores.ROS1_NOETIC)
     if TF_MESSAGE not in store.types:
-        store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_MESSAGE))
+        store.register(
+            get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_MESSAGE)
+        )
     return store

@@ -138,7 +138,9 @@ class RecordingWriter:
             header=self._header(stamp_ns, odom_frame),
             child_frame_id=base_frame,
             pose=types["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
-            twist=types["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)),
+            twist=types["geometry_msgs/msg/TwistWithCovariance"](
+                twist=twist, covariance=np.zeros(36)
+            ),
         )
         self._write(topic, ODOMETRY, stamp_ns, msg)
 
@@ -149,7 +151,10 @@ class RecordingWriter:
         *,
         static: bool = False,
     ) -> None:
-        """One `tf2_msgs/TFMessage` on `/tf` (or `/tf_static`): edges `(parent, child, T_parent_child)`."""
+        """One `tf2_msgs/TFMessage` on `/tf` (or `/tf_static`).
+
+        `edges` are `(parent, child, T_parent_child)`.
+        """
         types = self._store.types
         stamped = []
         for parent, child, T in edges:
