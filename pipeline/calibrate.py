@@ -28,8 +28,8 @@ from pipeline.segmentation import Plane, Segmentation, segment
 from pipeline.transforms import Matrix4, Points, invert, make_transform, pose_difference
 from pipeline.verdict import LidarEvidence, Verdict, judge
 
-Progress = Callable[[str, str], None]
-"""`progress(stage, message)`: called once per finished stage."""
+Progress = Callable[[str, float, str], None]
+"""`progress(stage, seconds, message)`: called once per finished stage."""
 
 STAGES: tuple[str, ...] = (
     "downsample",
@@ -251,8 +251,11 @@ def calibrate(
     from pipeline import __version__
 
     config = config or PipelineConfig()
-    report = progress or (lambda stage, message: None)
     stages: dict[str, StageReport] = {}
+
+    def report(stage: str, message: str) -> None:
+        if progress is not None:
+            progress(stage, stages[stage].seconds, message)
 
     prepared = prepare(problem, config)
     stages["downsample"] = StageReport(

@@ -80,8 +80,14 @@ class OptimisationConfig(BaseModel):
         ge=10,
         description="random subset of each (LiDAR, stop) object cloud; None keeps all",
     )
+    coarse_points_per_cloud: int | None = Field(
+        default=300,
+        ge=10,
+        description="a first phase on this many points per cloud gets close cheaply; None: no "
+        "coarse phase",
+    )
     translation_tolerance_m: float = Field(
-        default=1e-5, gt=0, description="converged when no pose moves more than this in one step"
+        default=1e-4, gt=0, description="converged when no pose moves more than this in one step"
     )
     rotation_tolerance_deg: float = Field(default=1e-3, gt=0)
     initial_damping: float = Field(
@@ -358,9 +364,19 @@ class _Problem:
         return float(np.sum(cost)) / self.config.point_sigma_m**2 + floor_cost
 
     def _floor_terms(
-        self, T_G_ref: NDArray[np.float64], T_ref_lidar: NDArray[np.float64], *, jacobians: bool
+        self,
+        T_G_ref: NDArray[np.float64],
+        T_ref_lidar: NDArray[np.float64],
+        *,
+        jacobians: bool,
+        ideal: bool = False,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Whitened floor residuals (K, 3) and, if asked, their Jacobians (K, 3, P)."""
+        """Whitened floor residuals (K, 3) and, if asked, their Jacobians (K, 3, P).
+
+        `ideal`: linearise at the common floor instead of at each observed plane. The exact
+        Jacobian gives a turn about the floor normal a little leverage through each plane's
+        residual tilt, which would make a bare floor look as if it fixed the yaw.
+        """
         assert self.floor_G is not None
         normal_G, offset_G = self.floor_G.normal, self.floor_G.offset
         tangent = tangent_basis(normal_G)
@@ -372,13 +388,24 @@ class _Problem:
             residual[row, 2] = offset - offset_G
             if not jacobians:
                 continue
+            at = normal_G if ideal else normal
             d_twist = np.zeros((3, 6))
-            d_twist[:2, 3:] = -tangent.T @ _hat_batch(normal[None])[0]
-            d_twist[2, :3] = -normal
+            d_twist[:2, 3:] = -tangent.T @ _hat_batch(at[None])[0]
+            d_twist[2, :3] = -at
             if (col := self.layout.stop(stop)) >= 0:
                 jac[row, :, col : col + 6] = d_twist
-            if (col := self.layout.lidar(lidar)) >= 0:
+            if (col := self.layout.lidar(lidar)) < 0:
+                continue
+            if not ideal:
                 jac[row, :, col : col + 6] = d_twist @ adjoint(T_G_ref[stop])
+                continue
+            # The same derivative with the plane taken as the floor itself in the reference
+            # frame (the robot stands on the floor at every stop).
+            R_stop, t_stop = T_G_ref[stop][:3, :3], T_G_ref[stop][:3, 3]
+            floor_ref = T_G_ref[0][:3, :3].T @ normal_G
+            jac[row, :2, col + 3 : col + 6] = -(tangent.T @ R_stop) @ _hat_batch(floor_ref[None])[0]
+            jac[row, 2, col : col + 3] = -floor_ref
+            jac[row, 2, col + 3 : col + 6] = -np.cross(floor_ref, R_stop.T @ t_stop)
         return residual / self.floor_sigma, jac / self.floor_sigma[None, :, None]
 
     # -- normal equations --------------------------------------------------------------------
@@ -389,9 +416,11 @@ class _Problem:
         T_G_ref: NDArray[np.float64],
         T_ref_lidar: NDArray[np.float64],
         scale: float,
+        *,
+        ideal_floor: bool = False,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, int]:
         """H = J^T W J, b = J^T W r (weights in 1/sigma^2), the weighted squared residual sum
-        and the number of residual rows."""
+        and the number of residual rows. `ideal_floor`: see `_floor_terms`."""
         layout = self.layout
         H = np.zeros((layout.size, layout.size))
         b = np.zeros(layout.size)
@@ -433,7 +462,7 @@ class _Problem:
             jac[:, :, 15:18] = _hat_batch(m)
         weighted = jac * weight[:, None, None]
         starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if n else np.zeros(0, np.int64)
-        ends = np.r_[starts[1:], n]
+        ends = np.r_[starts[1:], n] if n else starts
         for a, b_end in zip(starts, ends, strict=True):
             group = int(key[a])
             lidar, j, *_ = self.sources.slices[group // layout.n_stops]
@@ -461,7 +490,9 @@ class _Problem:
         chi2 = float(np.sum(weight[:, None] * residual**2))
         count = residual.size
         if self.floor:
-            floor_residual, floor_jac = self._floor_terms(T_G_ref, T_ref_lidar, jacobians=True)
+            floor_residual, floor_jac = self._floor_terms(
+                T_G_ref, T_ref_lidar, jacobians=True, ideal=ideal_floor
+            )
             H += np.einsum("kri,krj->ij", floor_jac, floor_jac)
             b += np.einsum("kri,kr->i", floor_jac, floor_residual)
             chi2 += float(np.sum(floor_residual**2))
@@ -514,70 +545,61 @@ def optimise(
     `smooth_clouds`.
     """
     started = time.perf_counter()
-    problem = _Problem(objects, planes, floor_G, len(T_G_ref), config, normals)
-    layout = problem.layout
+    fine = _Problem(objects, planes, floor_G, len(T_G_ref), config, normals)
+    layout = fine.layout
+    phases = [fine]
+    coarse_cap = config.coarse_points_per_cloud
+    if coarse_cap is not None and (
+        config.max_points_per_cloud is None or coarse_cap < config.max_points_per_cloud
+    ):
+        coarse_config = config.model_copy(update={"max_points_per_cloud": coarse_cap})
+        phases.insert(0, _Problem(objects, planes, floor_G, len(T_G_ref), coarse_config, normals))
     stops = np.array(T_G_ref, dtype=np.float64)
     lidars = np.array(T_ref_lidar, dtype=np.float64)
     history = [lidars.copy()]
     errors: list[float] = []
     damping = config.initial_damping
     converged, iteration = False, 0
-    pairs = problem.associate(problem.place(stops, lidars))
     scale = config.kernel_scale_min_m
-    H = np.zeros((layout.size, layout.size))
-    chi2, count = 0.0, 0
-    for iteration in range(1, config.max_iterations + 1):
-        errors.append(pairs.cross_error)
-        # Graduated robustness: wide at first, while everything is far off, then tight so that
-        # parts one LiDAR saw and the reference did not stop pulling.
-        scale = max(
-            config.kernel_scale_min_m,
-            config.kernel_scale_initial_m * config.kernel_scale_decay ** (iteration - 1),
-        )
-        H, b, chi2, count = problem.normal_equations(pairs, stops, lidars, scale)
-        cost = problem.cost(pairs, stops, lidars, scale)
-        # A pose nothing constrains (no objects, no floor) keeps its value instead of a
-        # singular solve; the observability stage reports it.
-        floor = 1e-12 * max(float(np.trace(H)) / max(layout.size, 1), 1.0)
-        accepted = False
-        for _ in range(10):
-            A = H + damping * np.diag(np.diag(H)) + floor * np.eye(layout.size)
-            step = np.asarray(-np.linalg.solve(A, b), dtype=np.float64)
-            trial_stops, trial_lidars = _apply_step(step, layout, stops, lidars)
-            if problem.cost(pairs, trial_stops, trial_lidars, scale) <= cost:
-                accepted = True
-                damping = max(damping / 3.0, 1e-9)
+    for phase, problem in enumerate(phases):
+        last = phase == len(phases) - 1
+        # The coarse phase only has to get close: it stops at ten times the tolerance.
+        tolerance = 1.0 if last else 10.0
+        converged = False
+        pairs = problem.associate(problem.place(stops, lidars))
+        while iteration < config.max_iterations:
+            iteration += 1
+            errors.append(pairs.cross_error)
+            # Graduated robustness: wide at first, while everything is far off, then tight so
+            # that parts one LiDAR saw and the reference did not stop pulling.
+            scale = max(
+                config.kernel_scale_min_m,
+                config.kernel_scale_initial_m * config.kernel_scale_decay ** (iteration - 1),
+            )
+            stops, lidars, moved, damping = _step(problem, pairs, stops, lidars, scale, damping)
+            history.append(lidars.copy())
+            pairs = problem.associate(problem.place(stops, lidars))
+            if moved is None or (
+                moved[0] < tolerance * config.translation_tolerance_m
+                and moved[1] < tolerance * config.rotation_tolerance_deg
+                and (not last or scale <= config.kernel_scale_min_m)
+            ):
+                converged = True
                 break
-            damping = max(damping * 4.0, 1e-6)
-        translation = rotation = 0.0
-        if accepted:
-            stop_motion = _largest_motion(stops, trial_stops)
-            lidar_motion = _largest_motion(lidars, trial_lidars)
-            translation = max(stop_motion[0], lidar_motion[0])
-            rotation = max(stop_motion[1], lidar_motion[1])
-            stops, lidars = trial_stops, trial_lidars
-        history.append(lidars.copy())
-        new_pairs = problem.associate(problem.place(stops, lidars))
-        if not accepted or (
-            translation < config.translation_tolerance_m
-            and rotation < config.rotation_tolerance_deg
-        ):
-            converged = True
-            pairs = new_pairs
-            break
-        pairs = new_pairs
+    problem = fine
+    pairs = problem.associate(problem.place(stops, lidars))
     errors.append(pairs.cross_error)
     # The information matrix and the variance factor at the solution, with its associations.
+    H = np.zeros((layout.size, layout.size))
+    chi2, count = 0.0, 0
     if len(pairs.source) or problem.floor:
-        H, _, chi2, count = problem.normal_equations(pairs, stops, lidars, scale)
+        H, _, chi2, count = problem.normal_equations(pairs, stops, lidars, scale, ideal_floor=True)
     redundancy = max(count - layout.size, 1)
     residual_rms = float("nan")
     if len(pairs.source):
         residual = problem.residuals(pairs, problem.place(stops, lidars))
         residual_rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
-    per_lidar = np.bincount(problem.sources.lidar[pairs.source], minlength=layout.n_lidars).astype(
-        int
-    )
+    per_lidar = np.bincount(problem.sources.lidar[pairs.source], minlength=layout.n_lidars)
     return OptimisationResult(
         T_G_ref=stops,
         T_ref_lidar=lidars,
@@ -592,3 +614,32 @@ def optimise(
         residual_rms_m=residual_rms,
         seconds=time.perf_counter() - started,
     )
+
+
+def _step(
+    problem: _Problem,
+    pairs: _Pairs,
+    stops: NDArray[np.float64],
+    lidars: NDArray[np.float64],
+    scale: float,
+    damping: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[float, float] | None, float]:
+    """One Levenberg-Marquardt step with fixed associations: the new poses, the largest motion
+    (m, deg) of any pose (None when no step lowered the cost) and the new damping."""
+    layout = problem.layout
+    H, b, _, _ = problem.normal_equations(pairs, stops, lidars, scale)
+    cost = problem.cost(pairs, stops, lidars, scale)
+    # A pose nothing constrains (no objects, no floor) keeps its value instead of a singular
+    # solve; the observability stage reports it.
+    floor = 1e-12 * max(float(np.trace(H)) / max(layout.size, 1), 1.0)
+    for _ in range(10):
+        A = H + damping * np.diag(np.diag(H)) + floor * np.eye(layout.size)
+        step = np.asarray(-np.linalg.solve(A, b), dtype=np.float64)
+        trial_stops, trial_lidars = _apply_step(step, layout, stops, lidars)
+        if problem.cost(pairs, trial_stops, trial_lidars, scale) <= cost:
+            stop_motion = _largest_motion(stops, trial_stops)
+            lidar_motion = _largest_motion(lidars, trial_lidars)
+            moved = (max(stop_motion[0], lidar_motion[0]), max(stop_motion[1], lidar_motion[1]))
+            return trial_stops, trial_lidars, moved, max(damping / 3.0, 1e-9)
+        damping = max(damping * 4.0, 1e-6)
+    return stops, lidars, None, damping

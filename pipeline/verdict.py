@@ -17,7 +17,12 @@ class VerdictConfig(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    max_metric_error_m: float = Field(default=0.01, gt=0, description="eq. 12 after calibration")
+    max_metric_error_m: float = Field(
+        default=0.02,
+        gt=0,
+        description="eq. 12 after calibration; it includes the point spacing (~5-10 mm at 2 cm "
+        "voxels), so it catches gross misalignment while the stddev checks judge precision",
+    )
     max_translation_stddev_m: float = Field(default=0.005, gt=0, description="per axis, per LiDAR")
     max_rotation_stddev_deg: float = Field(default=0.1, gt=0, description="per axis, per LiDAR")
     min_object_points: int = Field(

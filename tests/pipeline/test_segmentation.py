@@ -1,0 +1,70 @@
+import numpy as np
+
+from pipeline.segmentation import SegmentationConfig, euclidean_clusters, find_floor, segment
+from tests.pipeline.calibration_data import box_prepared, box_problem, floor_only_problem
+
+
+def test_clusters_split_at_gaps_and_join_within_the_radius() -> None:
+    rng = np.random.default_rng(0)
+    blob = rng.uniform(0.0, 0.2, size=(300, 3))
+    points = np.concatenate([blob, blob + np.array([1.0, 0.0, 0.0])])
+    labels = euclidean_clusters(points, 0.05)
+    assert len(np.unique(labels[:300])) == 1
+    assert len(np.unique(labels[300:])) == 1
+    assert labels[0] != labels[300]
+
+
+def test_floor_is_the_plane_facing_up_not_the_larger_wall() -> None:
+    rng = np.random.default_rng(1)
+    floor = np.column_stack([rng.uniform(-2, 2, (3000, 2)), np.full(3000, -0.8)])
+    wall = np.column_stack([np.full(6000, 3.0), rng.uniform([-2, -0.7], [2, 2], (6000, 2))])
+    up = np.array([0.0, 0.0, 1.0])
+    found = find_floor(
+        np.concatenate([floor, wall]),
+        up,
+        distance_m=0.02,
+        iterations=200,
+        scored_points=2000,
+        max_tilt_deg=30,
+        min_points=100,
+        rng=np.random.default_rng(0),
+    )
+    assert found is not None
+    plane, inliers, _ = found
+    np.testing.assert_allclose(plane.normal, up, atol=1e-6)
+    assert abs(plane.offset - 0.8) < 1e-6
+    assert inliers[:3000].all() and not inliers[3000:].any()
+
+
+def test_floor_and_objects_of_a_synthetic_recording_match_the_truth() -> None:
+    _, truth = box_problem()
+    prepared, segments = box_prepared()
+    true = {lidar.frame: lidar.T_base_lidar_true for lidar in truth.lidars}
+    config = SegmentationConfig()
+    for lidar, row in zip(prepared.lidars, segments, strict=True):
+        # base_link lies on the floor: in the LiDAR frame the floor's normal is base z and its
+        # offset the LiDAR's height.
+        T = true[lidar.frame]
+        normal, height = T[:3, :3].T @ [0.0, 0.0, 1.0], T[2, 3]
+        objects = 0
+        for segmentation in row:
+            assert segmentation.floor is not None
+            angle = np.degrees(np.arccos(np.clip(segmentation.floor.normal @ normal, -1, 1)))
+            assert angle < 0.2
+            assert abs(segmentation.floor.offset - height) < 0.005
+            above = segmentation.object_points @ normal + height
+            assert np.all(above > config.object_min_height_m - 0.03)
+            assert np.all(above < 0.35)  # the objects are 0.25 m tall
+            objects += len(segmentation.object_points)
+        assert objects > 1000
+
+
+def test_a_bare_floor_yields_almost_no_object_points() -> None:
+    problem, _ = floor_only_problem()
+    lidar = problem.lidars[0]
+    up = lidar.T_base_lidar[:3, :3].T @ [0.0, 0.0, 1.0]
+    total = sum(
+        len(segment(stop.clouds[lidar.frame], up, SegmentationConfig()).object_points)
+        for stop in problem.stops
+    )
+    assert total < 50
