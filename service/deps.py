@@ -31,7 +31,8 @@ class Services:
     metrics: Metrics
 
 
-def get_services(request: Request) -> Services:
+async def get_services(request: Request) -> Services:
+    # async: no I/O here, and a sync dependency would cost a thread hop on every request.
     services: Services | None = getattr(request.app.state, "services", None)
     if services is None:
         raise NotReady("the service is starting or stopping; retry shortly")
@@ -84,7 +85,7 @@ CurrentKey = Annotated[Principal, Depends(current_key)]
 
 
 def _require(scope: Scope) -> object:
-    def check(principal: CurrentKey) -> Principal:
+    async def check(principal: CurrentKey) -> Principal:  # async: no I/O, no thread hop
         if not principal.has(scope):
             raise Forbidden(f"this endpoint needs a key with the '{scope.value}' scope")
         return principal

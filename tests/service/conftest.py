@@ -105,6 +105,7 @@ def settings(db_url: str, tmp_path: Path) -> Settings:
 @pytest.fixture(scope="session")
 def s3_endpoint() -> Iterator[str]:
     """An S3-compatible server on loopback (moto's), as MinIO would be in a deployment."""
+    pytest.importorskip("boto3", reason="S3 storage needs boto3")
     moto_server = pytest.importorskip("moto.server", reason="moto[server] provides the S3 server")
     server = moto_server.ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
     server.start()
