@@ -1,8 +1,9 @@
 """API keys: creation (the secret is shown once), hashing, lookup, and the scope rules.
 
 A key reads `fck_<id>_<secret>`. The id is public and finds the row; the sha256 of the whole key is
-stored and compared in constant time. `admin` implies every scope; an `upload` key bound to a robot
-may upload for that robot only, and may read that robot's runs (a robot polls its own verdict).
+stored and compared in constant time. `admin` implies every scope. An `upload` key uploads and reads
+the runs, calibration and history of its robot (a robot polls its verdict and fetches its
+calibration); bound to a robot it may do so for that robot only, unbound (a factory line) for any.
 """
 
 from __future__ import annotations
