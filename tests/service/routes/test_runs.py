@@ -5,14 +5,16 @@ from __future__ import annotations
 
 import hashlib
 import json
+import threading
 import uuid
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
+from typing import Any
 
 import pytest
 
 from service import repository
-from service.models import Run, RunStatus
+from service.models import Run, RunKind, RunStatus
 from service.settings import Settings
 from tests.service.conftest import MCAP_MAGIC, Api, problem_type, recording, running_api
 from tests.service.documents import result_document
@@ -195,6 +197,43 @@ def test_a_repeated_idempotency_key_returns_the_first_run(api: Api) -> None:
     other_robot = api.upload("R2", body, **{"Idempotency-Key": "eol-2026-0001"})
     assert other_robot.json()["id"] != first.json()["id"]
     assert api.run_count() == 2
+
+
+def test_concurrent_uploads_with_one_idempotency_key_make_one_run(api: Api) -> None:
+    # The first upload's transaction is still open when the second checks the key and streams;
+    # the second's insert then waits for it, collides with it, and answers with its run.
+    first_id = uuid.uuid4()
+    first = api.services.db.write_session()
+    first.begin()
+    repository.record_upload(
+        first,
+        repository.NewUpload(
+            run_id=first_id,
+            robot_id="R1",
+            kind=RunKind.END_OF_LINE,
+            size=4096,
+            sha256="0" * 64,
+            format="mcap",
+            storage_key=f"recordings/R1/{first_id}",
+            idempotency_key="race",
+            config=None,
+            max_attempts=3,
+        ),
+        create_robot=True,
+    )
+    answers: list[Any] = []
+    second = threading.Thread(
+        target=lambda: answers.append(api.upload("R1", **{"Idempotency-Key": "race"}))
+    )
+    second.start()
+    second.join(1.0)
+    first.commit()
+    first.close()
+    second.join(60)
+    assert answers and answers[0].status_code == 202, answers
+    assert answers[0].json()["id"] == str(first_id)
+    assert api.run_count() == 1
+    assert api.stored_files() == []  # the second body was stored, then removed
 
 
 def test_an_idempotency_key_reused_for_another_body_or_kind_is_refused(api: Api) -> None:
