@@ -17,7 +17,6 @@ from numpy.typing import NDArray
 
 from pipeline.config import FramesConfig, PipelineConfig, config_hash
 from pipeline.denoise import denoise
-from pipeline.downsample import voxel_downsample
 from pipeline.errors import BadInputError
 from pipeline.metric import metric_error
 from pipeline.observability import PoseUncertainty, level_rotation, pose_uncertainties
@@ -32,7 +31,6 @@ Progress = Callable[[str, float, str], None]
 """`progress(stage, seconds, message)`: called once per finished stage."""
 
 STAGES: tuple[str, ...] = (
-    "downsample",
     "denoise",
     "segmentation",
     "rough_refinement",
@@ -134,9 +132,7 @@ class Prepared:
     T_ref_lidar: NDArray[np.float64]
     up: tuple[NDArray[np.float64], ...]
     input_points: int
-    downsampled_points: int
     removed_points: int
-    downsample_seconds: float
     denoise_seconds: float
 
 
@@ -165,7 +161,9 @@ def order_lidars(problem: CalibrationProblem, frames: FramesConfig) -> tuple[Lid
 def prepare(
     problem: CalibrationProblem, config: PipelineConfig, *, denoised: bool = True
 ) -> Prepared:
-    """Order the LiDARs, run stage 1 (when `denoised` and enabled) and set up the initial poses."""
+    """Order the LiDARs, run stage 1 (when `denoised` and enabled) and set up the initial poses.
+
+    Clouds stay at full rate: segmentation voxelises only what stands above the floor."""
     lidars = order_lidars(problem, config.frames)
     T_base_ref = lidars[0].T_base_lidar
     T_odom_ref0 = problem.stops[0].T_odom_base @ T_base_ref
@@ -176,23 +174,15 @@ def prepare(
     T_ref_lidar[0] = np.eye(4)
     up = tuple(lidar.T_base_lidar[:3, :3].T @ np.array([0.0, 0.0, 1.0]) for lidar in lidars)
     clouds = []
-    counts = {"input": 0, "downsampled": 0, "removed": 0}
-    seconds = {"downsample": 0.0, "denoise": 0.0}
+    counts = {"input": 0, "removed": 0}
+    started = time.perf_counter()
     for lidar in lidars:
         row = []
         for stop in problem.stops:
             cloud = np.asarray(stop.clouds.get(lidar.frame, np.zeros((0, 3))), dtype=np.float64)
             counts["input"] += len(cloud)
-            started = time.perf_counter()
-            cloud = voxel_downsample(cloud, config.downsample.voxel_size_m)
-            seconds["downsample"] += time.perf_counter() - started
-            counts["downsampled"] += len(cloud)
-            # Stage 1 runs on the voxel centroids: its neighbour statistics are relative, and
-            # the full-rate clouds are ten times too many points for the time budget.
             if denoised and config.denoise.enabled and len(cloud):
-                started = time.perf_counter()
                 kept = denoise(cloud, config.denoise)
-                seconds["denoise"] += time.perf_counter() - started
                 counts["removed"] += kept.removed_points
                 cloud = cloud[kept.keep]
             row.append(cloud)
@@ -204,10 +194,8 @@ def prepare(
         T_ref_lidar,
         up,
         counts["input"],
-        counts["downsampled"],
         counts["removed"],
-        seconds["downsample"],
-        seconds["denoise"],
+        time.perf_counter() - started,
     )
 
 
@@ -258,14 +246,10 @@ def calibrate(
             progress(stage, stages[stage].seconds, message)
 
     prepared = prepare(problem, config)
-    stages["downsample"] = StageReport(
-        prepared.downsample_seconds,
-        {"input_points": prepared.input_points, "output_points": prepared.downsampled_points},
-    )
-    report("downsample", f"{prepared.input_points} -> {prepared.downsampled_points} points")
     stages["denoise"] = StageReport(
         prepared.denoise_seconds,
         {
+            "input_points": prepared.input_points,
             "removed_points": prepared.removed_points,
             "enabled": config.denoise.enabled,
             "method": str(config.denoise.method),

@@ -16,7 +16,6 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.denoise import DenoiseConfig
-from pipeline.downsample import DownsampleConfig
 from pipeline.errors import ConfigError
 from pipeline.io.config import ReaderConfig
 from pipeline.metric import MetricConfig
@@ -51,7 +50,6 @@ class PipelineConfig(BaseModel):
 
     reader: ReaderConfig = ReaderConfig()
     frames: FramesConfig = FramesConfig()
-    downsample: DownsampleConfig = DownsampleConfig()
     denoise: DenoiseConfig = DenoiseConfig(enabled=False)
     """Off by default: on the voxel centroids of a full-rate set-1 recording it costs ~20 s (the
     time budget is 10 s for everything), and the bleeding points it targets only matter on the

@@ -1,26 +1,17 @@
-"""Stage 0: reduce each accumulated cloud to one point per occupied voxel (the centroid).
+"""Voxel downsampling: one point per occupied voxel (the centroid of the points in it).
 
-Full-rate clouds hold ~150k points per LiDAR and stop, mostly floor; every later stage works on
-the voxel centroids, which also average the range noise of the points they replace.
+Segmentation voxelises the object candidates (the centroids also average their range noise);
+the entire-cloud baseline voxelises whole clouds.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
 from pipeline.errors import BadInputError
 from pipeline.transforms import Points
 
 _HALF_RANGE = 1 << 20
-
-
-class DownsampleConfig(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
-
-    voxel_size_m: float = Field(
-        default=0.02, ge=0, description="edge of the cubic voxels; 0 keeps every point"
-    )
 
 
 def voxel_downsample(points: Points, voxel_size: float) -> Points:

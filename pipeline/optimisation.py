@@ -76,9 +76,10 @@ class OptimisationConfig(BaseModel):
         description="project every object point onto its local plane (removes range noise)",
     )
     max_points_per_cloud: int | None = Field(
-        default=None,
+        default=1000,
         ge=10,
-        description="random subset of each (LiDAR, stop) object cloud; None keeps all",
+        description="random subset of each (LiDAR, stop) object cloud in the final phase; None "
+        "keeps all (at full rate ~2.5k: about 1.5 mm better, three times slower)",
     )
     coarse_points_per_cloud: int | None = Field(
         default=300,
@@ -176,6 +177,15 @@ class _Clouds:
             if vectors is None:
                 out[a:b] += T[:3, 3]
         return out
+
+
+def _cross(a: Points, b: Points) -> Points:
+    """Row-wise cross product of (N, 3) arrays; `np.cross` spends more on axis bookkeeping."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def _hat_batch(v: Points) -> NDArray[np.float64]:
@@ -405,7 +415,7 @@ class _Problem:
             floor_ref = T_G_ref[0][:3, :3].T @ normal_G
             jac[row, :2, col + 3 : col + 6] = -(tangent.T @ R_stop) @ _hat_batch(floor_ref[None])[0]
             jac[row, 2, col : col + 3] = -floor_ref
-            jac[row, 2, col + 3 : col + 6] = -np.cross(floor_ref, R_stop.T @ t_stop)
+            jac[row, 2, col + 3 : col + 6] = -_cross(floor_ref, R_stop.T @ t_stop)
         return residual / self.floor_sigma, jac / self.floor_sigma[None, :, None]
 
     # -- normal equations --------------------------------------------------------------------
@@ -446,12 +456,12 @@ class _Problem:
             n_G = placed.normals_G[tgt]
             n_ref = np.einsum("nji,nj->ni", R_stop, n_G)  # the normal in the reference frame
             jac[:, 0, 0:3] = n_G
-            jac[:, 0, 3:6] = np.cross(g, n_G)
+            jac[:, 0, 3:6] = _cross(g, n_G)
             jac[:, 0, 6:9] = n_ref
-            jac[:, 0, 9:12] = np.cross(q, n_ref)
+            jac[:, 0, 9:12] = _cross(q, n_ref)
             jac[:, 0, 12:15] = -n_G
             # The target's normal turns with its stop too: d(n.(g - m))/d(phi_k).
-            jac[:, 0, 15:18] = -np.cross(m, n_G) + np.cross(n_G, g - m)
+            jac[:, 0, 15:18] = -_cross(m, n_G) + _cross(n_G, g - m)
         else:
             eye = np.broadcast_to(np.eye(3), (n, 3, 3))
             jac[:, :, 0:3] = eye

@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from pipeline.downsample import voxel_downsample
 from pipeline.surfaces import local_planes
 from pipeline.transforms import Points
 
@@ -29,6 +30,15 @@ class SegmentationConfig(BaseModel):
 
     floor_distance_m: float = Field(
         default=0.02, gt=0, description="RANSAC inlier band around the floor"
+    )
+    voxel_size_m: float = Field(
+        default=0.02,
+        ge=0,
+        description="object candidates are reduced to one point (the centroid) per voxel of this "
+        "edge, which also averages their range noise; 0 keeps every point",
+    )
+    floor_fit_points: int | None = Field(
+        default=20_000, ge=3, description="the floor's least-squares refit uses this many inliers"
     )
     ransac_iterations: int = Field(
         default=100, ge=1, description="the floor is most of the cloud: 100 draws find it"
@@ -87,7 +97,7 @@ class Plane:
 
 @dataclass(frozen=True)
 class Segmentation:
-    """One cloud split into floor and objects, all (N, 3) in the LiDAR frame.
+    """One cloud split into floor and objects, (N, 3) in the LiDAR frame (objects voxelised).
 
     `object_normals` (N, 3): the unit normal of each object point's local surface.
 
@@ -96,7 +106,7 @@ class Segmentation:
     """
 
     floor: Plane | None
-    floor_points: Points
+    floor_inliers: int
     object_points: Points
     object_normals: Points
     cluster_count: int
@@ -125,11 +135,13 @@ def find_floor(
     max_tilt_deg: float,
     min_points: int,
     rng: np.random.Generator,
+    fit_points: int | None = None,
 ) -> tuple[Plane, NDArray[np.bool_], float] | None:
     """RANSAC for the plane with most inliers whose normal is within `max_tilt_deg` of `up` (3,).
 
-    Returns the refined plane (normal oriented along `up`), the inlier mask over `points` and the
-    inliers' RMS distance; None when no such plane has `min_points` inliers.
+    Returns the plane refined by least squares (normal oriented along `up`; on at most
+    `fit_points` random inliers when given), the inlier mask over `points` and the inliers' RMS
+    distance; None when no such plane has `min_points` inliers.
     """
     n = len(points)
     if n < max(3, min_points):
@@ -145,21 +157,25 @@ def find_floor(
     if len(normals) == 0:
         return None
     offsets = -np.einsum("ij,ij->i", normals, samples[valid][tilted, 0])
-    scored = points[rng.choice(n, size=min(n, scored_points), replace=False)]
+    scored = points[rng.integers(0, n, size=min(n, scored_points))]
     counts = (np.abs(scored @ normals.T + offsets) < distance_m).sum(axis=0)
     best = int(np.argmax(counts))
-    inliers = np.abs(points @ normals[best] + offsets[best]) < distance_m
+    normal, offset = normals[best], float(offsets[best])
     # Two least-squares refits: the first moves the band onto the true floor, the second uses it.
     for _ in range(2):
-        if inliers.sum() < max(3, min_points):
+        inliers = np.abs(points @ normal + offset) < distance_m
+        index = np.flatnonzero(inliers)
+        if len(index) < max(3, min_points):
             return None
-        normal, offset, _ = fit_plane(points[inliers])
+        if fit_points is not None and len(index) > fit_points:
+            # The noise averages out long before the last of ~100k inliers.
+            index = index[rng.integers(0, len(index), size=fit_points)]
+        normal, offset, rms = fit_plane(points[index])
         if normal @ up < 0:
             normal, offset = -normal, -offset
-        inliers = np.abs(points @ normal + offset) < distance_m
+    inliers = np.abs(points @ normal + offset) < distance_m
     if inliers.sum() < max(3, min_points) or normal @ up < np.cos(np.radians(max_tilt_deg)):
         return None
-    rms = float(np.sqrt(np.mean((points[inliers] @ normal + offset) ** 2)))
     return Plane(normal=normal, offset=offset), inliers, rms
 
 
@@ -215,6 +231,9 @@ def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig)
     started = time.perf_counter()
     cloud = np.asarray(points, dtype=np.float64)
     up = np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
+    # The floor is found among the raw points (a sample scores the hypotheses, a sample refits
+    # the plane); only the points above it are voxelised: the floor is ~90 % of a full-rate
+    # cloud and voxelising it would cost more than everything else in this stage.
     found = find_floor(
         cloud,
         up,
@@ -224,15 +243,19 @@ def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig)
         max_tilt_deg=config.max_floor_tilt_deg,
         min_points=config.min_floor_points,
         rng=np.random.default_rng(config.seed),
+        fit_points=config.floor_fit_points,
     )
     if found is None:
         # Objects are what stands on the floor: without a floor nothing can be told apart from it.
-        floor, floor_mask, rms = None, np.zeros(len(cloud), dtype=bool), float("nan")
+        floor, floor_inliers, rms = None, 0, float("nan")
         candidates = cloud[:0]
     else:
         floor, floor_mask, rms = found
+        floor_inliers = int(np.count_nonzero(floor_mask))
         height = cloud @ floor.normal + floor.offset
-        candidates = cloud[height > config.object_min_height_m]
+        candidates = voxel_downsample(
+            cloud[height > config.object_min_height_m], config.voxel_size_m
+        )
     labels = euclidean_clusters(candidates, config.cluster_radius_m)
     sizes = np.bincount(labels) if len(labels) else np.zeros(0, dtype=np.int64)
     kept = sizes >= config.min_cluster_points
@@ -249,7 +272,7 @@ def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig)
         objects = objects[:0]
     return Segmentation(
         floor=floor,
-        floor_points=cloud[floor_mask],
+        floor_inliers=floor_inliers,
         object_points=objects,
         object_normals=normals,
         cluster_count=int(kept.sum()),

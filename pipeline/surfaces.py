@@ -25,10 +25,12 @@ def local_planes(points: Points, neighbours: int) -> tuple[Points, Points]:
         return points.copy(), np.tile(np.array([0.0, 0.0, 1.0]), (len(points), 1))
     k = min(neighbours, len(points))
     _, idx = KDTree(points).query(points, k=k)
-    local = points[idx]
-    centroid = local.mean(axis=1)
-    local -= centroid[:, None, :]
-    x, y, z = local[:, :, 0], local[:, :, 1], local[:, :, 2]
+    # One contiguous (N, k) array per axis: strided views of an (N, k, 3) gather are slower.
+    x, y, z = (points[:, axis][idx] for axis in range(3))
+    centroid = np.column_stack([x.mean(axis=1), y.mean(axis=1), z.mean(axis=1)])
+    x -= centroid[:, 0:1]
+    y -= centroid[:, 1:2]
+    z -= centroid[:, 2:3]
     covariance = np.empty((len(points), 3, 3))
     covariance[:, 0, 0] = np.einsum("nk,nk->n", x, x)
     covariance[:, 1, 1] = np.einsum("nk,nk->n", y, y)

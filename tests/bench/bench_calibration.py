@@ -1,0 +1,396 @@
+"""Accuracy, convergence, stage times and peak memory of the calibration (issue 3's protocol).
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python -m tests.bench.bench_calibration [--quick]
+        [--seeds 10] [--rate 0.25] [--cases set1-box ...] [--methods proposed ...]
+        [--no-timing] [--plot convergence.png] [--recordings DIR]
+
+Accuracy: for every case and seed, `simulate_problem(case, seed, rate)` (initial extrinsics
+perturbed by up to 0.2 m / 5 deg, odometry by up to 0.2 m / 3 deg, as in the paper) is calibrated
+by each method; the error of each non-reference LiDAR relative to the reference (translation m,
+rotation deg) is compared with the synthesiser's truth. Methods: `proposed` (the pipeline as
+configured by default), `point_to_point` (the same with the paper's point-to-point residual),
+`without_rr` (no rough refinement, no floor terms), `entire_cloud` (the same optimiser on every
+point, no segmentation). `initial` is the error before calibration.
+
+Convergence: mean translation / rotation error per stage-4 iteration over the set-1 trials (a
+table and a PNG). Timing: full-rate set-1 (and set-2) recordings are written once, then each goes
+file -> result.json in a fresh process (read, all stages, JSON): wall and CPU seconds, peak RSS.
+The machine's load average is printed beside the timings: wall time on a shared machine is
+blurred by other work, CPU time much less.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from collections import defaultdict  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from dataclasses import dataclass, field  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
+
+CASES = (
+    "set1-box",
+    "set1-cylinder",
+    "set1-capsule",
+    "set2-box",
+    "set2-cylinder",
+    "set2-capsule",
+    "spinning",
+    "driven",
+)
+METHODS = ("proposed", "point_to_point", "without_rr", "entire_cloud")
+
+
+@dataclass
+class Trial:
+    """Errors of one method on one (case, seed): per non-reference LiDAR (m, deg)."""
+
+    translation: list[float] = field(default_factory=list)
+    rotation: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+    iterations: int = 0
+    converged: bool = True
+    passed: bool | None = None
+    history_translation: list[float] = field(default_factory=list)
+    history_rotation: list[float] = field(default_factory=list)
+    stages: dict[str, float] = field(default_factory=dict)
+
+
+def _errors(
+    estimate: NDArray[np.float64], truth: NDArray[np.float64]
+) -> tuple[list[float], list[float]]:
+    """Per non-reference LiDAR: `estimate`, `truth` (L, 4, 4) are T_ref_lidar, reference first."""
+    from pipeline.transforms import pose_difference
+
+    pairs = [pose_difference(truth[i], estimate[i]) for i in range(1, len(truth))]
+    return [p[0] for p in pairs], [p[1] for p in pairs]
+
+
+def _history(
+    per_iteration: NDArray[np.float64], truth: NDArray[np.float64]
+) -> tuple[list[float], list[float]]:
+    """Mean error over the non-reference LiDARs at each iteration; (K, L, 4, 4) in."""
+    translation, rotation = [], []
+    for T in per_iteration:
+        t, r = _errors(T, truth)
+        translation.append(float(np.mean(t)))
+        rotation.append(float(np.mean(r)))
+    return translation, rotation
+
+
+def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict[str, Trial]:
+    from pipeline.baselines import entire_cloud, without_rough_refinement
+    from pipeline.calibrate import calibrate, order_lidars
+    from pipeline.config import PipelineConfig, config_from_mapping, resolved
+    from pipeline.synth import simulate_problem
+    from pipeline.transforms import invert
+
+    problem, truth = simulate_problem(case, seed, rate)
+    config = PipelineConfig()
+    frames = [lidar.frame for lidar in order_lidars(problem, config.frames)]
+    true = {lidar.frame: lidar.T_base_lidar_true for lidar in truth.lidars}
+    T_true = np.stack([invert(true[frames[0]]) @ true[f] for f in frames])
+    initial = {lidar.frame: lidar.T_base_lidar for lidar in problem.lidars}
+    T_initial = np.stack([invert(initial[frames[0]]) @ initial[f] for f in frames])
+    trials: dict[str, Trial] = {}
+    t, r = _errors(T_initial, T_true)
+    trials["initial"] = Trial(t, r)
+    for method in methods:
+        started = time.perf_counter()
+        if method == "entire_cloud":
+            baseline = entire_cloud(problem, config)
+            estimate = np.stack(
+                [invert(baseline.T_base_lidar[0]) @ T for T in baseline.T_base_lidar]
+            )
+            optimisation = baseline.optimisation
+            passed = None
+            stages: dict[str, float] = {}
+        else:
+            if method == "proposed":
+                result = calibrate(problem, config)
+            elif method == "point_to_point":
+                data = resolved(config)
+                data["optimisation"]["residual"] = "point_to_point"
+                result = calibrate(problem, config_from_mapping(data))
+            elif method == "without_rr":
+                result = without_rough_refinement(problem, config)
+            else:
+                raise SystemExit(f"unknown method {method!r}; choose from {METHODS}")
+            reference = result.lidars[0].T_base_lidar_calibrated
+            estimate = np.stack(
+                [invert(reference) @ x.T_base_lidar_calibrated for x in result.lidars]
+            )
+            optimisation = result.optimisation
+            passed = result.passed
+            stages = {name: report.seconds for name, report in result.stages.items()}
+        seconds = time.perf_counter() - started
+        t, r = _errors(estimate, T_true)
+        history_t, history_r = _history(optimisation.T_ref_lidar_per_iteration, T_true)
+        trials[method] = Trial(
+            t,
+            r,
+            seconds,
+            optimisation.iterations,
+            optimisation.converged,
+            passed,
+            history_t,
+            history_r,
+            stages,
+        )
+    return trials
+
+
+# -- tables ----------------------------------------------------------------------------------
+
+
+def accuracy_table(results: dict[str, list[dict[str, Trial]]], methods: Sequence[str]) -> str:
+    lines = [
+        "| case | method | trials | mean t (mm) | max t (mm) | mean r (deg) | max r (deg) "
+        "| iterations | converged | verdict passed | seconds |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for case, trials in results.items():
+        for method in ("initial", *methods):
+            runs = [trial[method] for trial in trials if method in trial]
+            t = np.concatenate([run.translation for run in runs]) * 1000
+            r = np.concatenate([run.rotation for run in runs])
+            if method == "initial":
+                extra = "| | | | "
+            else:
+                passed = [run.passed for run in runs if run.passed is not None]
+                extra = (
+                    f"| {np.mean([run.iterations for run in runs]):.0f} "
+                    f"| {sum(run.converged for run in runs)}/{len(runs)} "
+                    f"| {f'{sum(passed)}/{len(passed)}' if passed else 'n/a'} "
+                    f"| {np.mean([run.seconds for run in runs]):.1f} "
+                )
+            lines.append(
+                f"| {case} | {method} | {len(runs)} | {t.mean():.2f} | {t.max():.2f} "
+                f"| {r.mean():.3f} | {r.max():.3f} {extra}|"
+            )
+    return "\n".join(lines)
+
+
+def stage_table(results: dict[str, list[dict[str, Trial]]]) -> str:
+    stages: list[str] = []
+    for trials in results.values():
+        for trial in trials:
+            if "proposed" in trial:
+                stages = list(trial["proposed"].stages)
+                break
+    if not stages:
+        return ""
+    lines = [
+        "| case | " + " | ".join(stages) + " |",
+        "|---|" + "---|" * len(stages),
+    ]
+    for case, trials in results.items():
+        runs = [trial["proposed"] for trial in trials if "proposed" in trial]
+        means = [np.mean([run.stages.get(s, 0.0) for run in runs]) for s in stages]
+        lines.append(f"| {case} | " + " | ".join(f"{m:.2f}" for m in means) + " |")
+    return "\n".join(lines)
+
+
+def convergence(
+    results: dict[str, list[dict[str, Trial]]], methods: Sequence[str]
+) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Mean error per iteration over the set-1 trials (a run that stopped early holds its last
+    value)."""
+    curves: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+    for method in methods:
+        runs = [
+            trial[method]
+            for case, trials in results.items()
+            if case.startswith("set1")
+            for trial in trials
+            if method in trial
+        ]
+        if not runs:
+            continue
+        length = max(len(run.history_translation) for run in runs)
+
+        def padded(values: list[float], length: int = length) -> list[float]:
+            return values + [values[-1]] * (length - len(values))
+
+        curves[method] = (
+            np.mean([padded(run.history_translation) for run in runs], axis=0),
+            np.mean([padded(run.history_rotation) for run in runs], axis=0),
+        )
+    return curves
+
+
+def convergence_table(curves: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]) -> str:
+    marks = [0, 5, 10, 20, 30, 50, 100, 200]
+    lines = [
+        "| method | " + " | ".join(f"it {k}" for k in marks) + " |",
+        "|---|" + "---|" * len(marks),
+    ]
+    for method, (t, r) in curves.items():
+        cells = [
+            f"{t[min(k, len(t) - 1)] * 1000:.1f} mm / {r[min(k, len(r) - 1)]:.2f}°" for k in marks
+        ]
+        lines.append(f"| {method} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot(curves: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    for method, (t, r) in curves.items():
+        left.plot(np.arange(len(t)), t * 1000, label=method)
+        right.plot(np.arange(len(r)), r, label=method)
+    left.set(xlabel="iteration", ylabel="translation error (mm)", yscale="log")
+    right.set(xlabel="iteration", ylabel="rotation error (deg)", yscale="log")
+    left.legend()
+    figure.suptitle("Set 1: mean extrinsic error per stage-4 iteration")
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+# -- file -> result.json timing ----------------------------------------------------------------
+
+_CHILD = """
+import json, resource, sys, time
+started, cpu = time.perf_counter(), time.process_time()
+from pipeline.calibrate import calibrate
+from pipeline.config import PipelineConfig
+from pipeline.io import read_recording
+from pipeline.result import dumps
+config = PipelineConfig()
+read_started = time.perf_counter()
+problem = read_recording(sys.argv[1], config.reader)
+read = time.perf_counter() - read_started
+result = calibrate(problem, config)
+open(sys.argv[2], "w").write(dumps(result, read_seconds=read))
+print(json.dumps({
+    "wall_s": time.perf_counter() - started,
+    "cpu_s": time.process_time() - cpu,
+    "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    "points": problem.kept_points(),
+}))
+"""
+
+
+def timing(case: str, recordings: Path) -> dict[str, object]:
+    from pipeline.synth.recording import write_recording
+
+    directory = recordings / f"{case}-full"
+    if not (directory / "recording").exists():
+        print(f"writing a full-rate {case} recording to {directory} ...", file=sys.stderr)
+        write_recording(case, directory, seed=0)
+    bag = directory / "recording"
+    size_mb = sum(f.stat().st_size for f in bag.rglob("*") if f.is_file()) / 1e6
+    output = directory / "result.json"
+    started = time.perf_counter()
+    child = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(bag), str(output)],
+        check=True,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"},
+    )
+    process_wall = time.perf_counter() - started
+    measured = json.loads(child.stdout.strip().splitlines()[-1])
+    document = json.loads(output.read_text())
+    return {
+        "case": case,
+        "size_mb": size_mb,
+        "process_wall_s": process_wall,
+        **measured,
+        "stages": {name: stage["seconds"] for name, stage in document["stages"].items()},
+        "passed": document["verdict"]["passed"],
+        "load": os.getloadavg()[0],
+    }
+
+
+def timing_table(rows: list[dict[str, object]]) -> str:
+    lines = [
+        "| recording | size (MB) | points | process wall (s) | in-process wall (s) | CPU (s) "
+        "| peak RSS (MB) | load avg | verdict |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {row['case']} full rate | {row['size_mb']:.0f} | {row['points']} "
+            f"| {row['process_wall_s']:.1f} | {row['wall_s']:.1f} | {row['cpu_s']:.1f} "
+            f"| {row['peak_rss_mb']:.0f} | {row['load']:.1f} "
+            f"| {'passed' if row['passed'] else 'FAILED'} |"
+        )
+    stages = list(rows[0]["stages"]) if rows else []  # type: ignore[call-overload]
+    if stages:
+        lines += ["", "| recording | " + " | ".join(stages) + " |", "|---|" + "---|" * len(stages)]
+        for row in rows:
+            values = row["stages"]
+            assert isinstance(values, dict)
+            lines.append(
+                f"| {row['case']} | " + " | ".join(f"{values[s]:.2f}" for s in stages) + " |"
+            )
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="2 seeds, rate 0.1, two cases")
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--rate", type=float, default=0.25, help="LiDAR rate scale of trials")
+    parser.add_argument("--cases", nargs="*", default=list(CASES))
+    parser.add_argument("--methods", nargs="*", default=list(METHODS))
+    parser.add_argument("--no-timing", action="store_true")
+    parser.add_argument("--timing-cases", nargs="*", default=["set1-box", "set2-box"])
+    parser.add_argument("--plot", type=Path, default=Path("convergence.png"))
+    parser.add_argument("--recordings", type=Path, default=Path("/tmp/fleetcal-bench"))
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.seeds, args.rate = min(args.seeds, 2), min(args.rate, 0.1)
+        args.cases = [c for c in args.cases if c in ("set1-box", "set2-box")] or ["set1-box"]
+        args.timing_cases = args.timing_cases[:1]
+    results: dict[str, list[dict[str, Trial]]] = defaultdict(list)
+    for case in args.cases:
+        for seed in range(args.seeds):
+            started = time.perf_counter()
+            trial = run_trial(case, seed, args.rate, args.methods)
+            results[case].append(trial)
+            summary = ", ".join(
+                f"{m} {1000 * max(trial[m].translation):.1f} mm / {max(trial[m].rotation):.3f}°"
+                for m in ("initial", *args.methods)
+            )
+            print(
+                f"{case} seed {seed}: {summary} ({time.perf_counter() - started:.0f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
+    print(f"## Accuracy ({args.seeds} seeds per case, rate scale {args.rate})\n")
+    print(accuracy_table(results, args.methods))
+    print("\n## Stage times of the proposed method (mean seconds per trial)\n")
+    print(stage_table(results))
+    curves = convergence(results, args.methods)
+    if curves:
+        print("\n## Convergence on set 1 (mean error at stage-4 iteration k)\n")
+        print(convergence_table(curves))
+        plot(curves, args.plot)
+        print(f"\nplot: {args.plot}")
+    if not args.no_timing:
+        args.recordings.mkdir(parents=True, exist_ok=True)
+        rows = [timing(case, args.recordings) for case in args.timing_cases]
+        print("\n## File -> result.json, full rate (fresh process each)\n")
+        print(timing_table(rows))
+
+
+if __name__ == "__main__":
+    main()
