@@ -66,7 +66,7 @@ class DenoiseMethod(enum.StrEnum):
 
 class DenoiseConfig(BaseModel):
     """Stage 1's parameters. `k`, `cs`, `cr` are the paper's (`k = 20`, `C_s = 0.01`,
-    `C_r = 3.0`); `density_ratio`, `beam_cos` and `cell_deg` belong to `pattern` only."""
+    `C_r = 3.0`); `density_ratio`, `beam_cos`, `beam_extent` and `cell_deg` belong to `pattern`."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
@@ -80,6 +80,11 @@ class DenoiseConfig(BaseModel):
     )
     beam_cos: float = Field(
         default=0.2, ge=0.0, le=1.0, description="pattern: |cos| beam vs local normal for edge-on"
+    )
+    beam_extent: float = Field(
+        default=0.5,
+        ge=0.0,
+        description="pattern: spread along the beam over mu_n for a sheet (spinning: try 0.75)",
     )
     cell_deg: float = Field(
         default=10.0, gt=0.0, le=90.0, description="pattern: direction cell for the scan's spacing"
@@ -150,6 +155,7 @@ def denoise(
             cloud,
             density_ratio=cfg.density_ratio,
             beam_cos=cfg.beam_cos,
+            beam_extent=cfg.beam_extent,
             cell_deg=cfg.cell_deg,
         )
     elif cfg.method is DenoiseMethod.SOR:

@@ -110,6 +110,7 @@ def pattern_keep(
     *,
     density_ratio: float = 1.8,
     beam_cos: float = 0.2,
+    beam_extent: float = 0.5,
     cell_deg: float = 10.0,
 ) -> KeepMask:
     """Ours: remove a point that is sparse *for its place in the scan* and lies in a beam sheet.
@@ -125,7 +126,10 @@ def pattern_keep(
     2. Candidates: `mu_n > density_ratio * r_n * median_cell(mu / r)`.
     3. A mixed return lies on the beam between the edge and the background, so bleeding points
        form sheets that contain the beam. A candidate is noise if the plane fitted to its `k`
-       neighbours is seen edge-on: `|normal . beam| < beam_cos`. Sparse but facing surfaces
+       neighbours is seen edge-on, `|normal . beam| < beam_cos`, and the neighbours spread along
+       the beam by more than range noise does: their standard deviation along the beam exceeds
+       `beam_extent * mu_n` (about 0.75 for an even sheet; a surface thickened by range noise,
+       such as a spinning LiDAR's scan line, stays well below). Sparse but facing surfaces
        (a far wall, a far object) are kept.
 
     Only candidates (a few per cent) get the plane fit, which keeps the cost near one kNN query.
@@ -145,10 +149,12 @@ def pattern_keep(
         return keep
     patches = cloud[neighbours.index[candidates]]
     patches -= patches.mean(axis=1, keepdims=True)
-    scatter = np.einsum("nki,nkj->nij", patches, patches)
+    scatter = np.einsum("nki,nkj->nij", patches, patches) / k
     normals = np.linalg.eigh(scatter)[1][:, :, 0]  # eigenvalues ascend: the smallest is the normal
-    edge_on = np.abs(np.einsum("ij,ij->i", normals, beams[candidates])) < beam_cos
-    keep[candidates[edge_on]] = False
+    beam = beams[candidates]
+    edge_on = np.abs(np.einsum("ij,ij->i", normals, beam)) < beam_cos
+    along_beam = np.sqrt(np.einsum("ni,nij,nj->n", beam, scatter, beam))
+    keep[candidates[edge_on & (along_beam > beam_extent * mu[candidates])]] = False
     return keep
 
 
@@ -219,6 +225,7 @@ def pattern_mask(
     *,
     density_ratio: float = 1.8,
     beam_cos: float = 0.2,
+    beam_extent: float = 0.5,
     cell_deg: float = 10.0,
 ) -> KeepMask:
     """Our scan-pattern filter's keep mask (N,) of an (N, 3) cloud, sensor at the origin (see
@@ -231,5 +238,6 @@ def pattern_mask(
         cloud,
         density_ratio=density_ratio,
         beam_cos=beam_cos,
+        beam_extent=beam_extent,
         cell_deg=cell_deg,
     )
