@@ -96,9 +96,10 @@ def put_robot(
 def get_calibration(
     robot_id: RobotIdPath, principal: CurrentKey, session: SessionDep
 ) -> CalibrationPublic:
-    _readable_robot(session, principal, robot_id)
+    _check_readable(principal, robot_id)
     result = repository.latest_calibration(session, robot_id)
     if result is None:
+        _readable_robot(session, principal, robot_id)  # 404 if there is no such robot
         raise NoCalibration(f"robot {robot_id!r} has no passed calibration yet")
     lidars = {
         point.frame: LidarCalibration(
@@ -133,7 +134,7 @@ def get_history(
     limit: Annotated[int, Query(ge=1, le=HISTORY_LIMIT_MAX)] = HISTORY_LIMIT_DEFAULT,
     cursor: Annotated[str | None, Query(max_length=512)] = None,
 ) -> HistoryPage:
-    _readable_robot(session, principal, robot_id)
+    _check_readable(principal, robot_id)
     after = None
     if cursor is not None:
         measured, row_id = decode_cursor(cursor, "history", 2)
@@ -150,6 +151,8 @@ def get_history(
         limit=limit + 1,
         after=after,
     )
+    if not rows:
+        _readable_robot(session, principal, robot_id)  # 404 if there is no such robot
     # One validation call for the page, reading the points' attributes (the hot listing).
     items = _HISTORY_POINTS.validate_python(rows[:limit], from_attributes=True)
     next_cursor = None
@@ -169,9 +172,15 @@ def robot_public(robot: Robot) -> RobotPublic:
     )
 
 
-def _readable_robot(session: Session, principal: Principal, robot_id: str) -> Robot:
+def _check_readable(principal: Principal, robot_id: str) -> None:
     if not principal.may_read_robot(robot_id):
         raise Forbidden(f"this key may not read robot {robot_id!r}")
+
+
+def _readable_robot(session: Session, principal: Principal, robot_id: str) -> Robot:
+    """The robot, if the key may read it (403) and it exists (404). Listings skip the lookup
+    when they find rows: rows imply the robot."""
+    _check_readable(principal, robot_id)
     robot = repository.get_robot(session, robot_id)
     if robot is None:
         raise RobotNotFound(f"no robot {robot_id!r}")
