@@ -29,7 +29,7 @@ from pykdtree.kdtree import KDTree
 
 from pipeline.rough_refinement import adjoint, plane_in_parent, tangent_basis
 from pipeline.segmentation import Plane
-from pipeline.surfaces import local_planes
+from pipeline.surfaces import local_planes, orient_towards_origin
 from pipeline.transforms import Matrix4, Points, exp_se3
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
@@ -53,6 +53,13 @@ class OptimisationConfig(BaseModel):
         default=0.8, gt=0, le=1, description="the scale shrinks by this factor every iteration..."
     )
     kernel_scale_min_m: float = Field(default=0.015, gt=0, description="...down to this")
+    max_normal_angle_deg: float | None = Field(
+        default=45.0,
+        gt=0,
+        le=180,
+        description="pairs whose surface normals (facing their sensors) differ more are dropped: "
+        "the front and the back of an object seen from opposite sides are not the same surface",
+    )
     max_correspondence_m: float = Field(
         default=0.5, gt=0, description="pairs further apart than this are ignored"
     )
@@ -218,6 +225,7 @@ class _Placed:
 
     source_ref: Points
     source_G: Points
+    source_normals_G: Points
     reference_G: Points
     normals_G: Points
 
@@ -271,14 +279,21 @@ class _Problem:
             part_normals = [
                 np.asarray(normals[i][j], dtype=np.float64)[keep] for i, j, keep in kept
             ]
+        # Normals face their sensor (at each cloud's origin), so that the two sides of a thin
+        # object, seen by LiDARs on opposite sides, are told apart by their normals.
+        part_normals = [
+            orient_towards_origin(p, n) for (*_, p), n in zip(parts, part_normals, strict=True)
+        ]
         reference = [p for p in parts if p[0] == 0]
         self.reference = _Clouds.build(reference)
         reference_normals = [n for (i, *_), n in zip(parts, part_normals, strict=True) if i == 0]
         self.reference_normals = (
             np.concatenate(reference_normals) if reference_normals else np.zeros((0, 3))
         )
-        sources = [p for p in parts if p[0] > 0 or config.reference_self_consistency]
-        self.sources = _Clouds.build(sources)
+        used = [p[0] > 0 or config.reference_self_consistency for p in parts]
+        self.sources = _Clouds.build([p for p, u in zip(parts, used, strict=True) if u])
+        source_normals = [n for n, u in zip(part_normals, used, strict=True) if u]
+        self.source_normals = np.concatenate(source_normals) if source_normals else np.zeros((0, 3))
         self.source_starts = np.array([a for *_, a, _ in self.sources.slices], dtype=np.int64)
         self.floor: list[tuple[int, int, Plane]] = []
         if planes is not None and floor_G is not None and config.floor_terms:
@@ -300,9 +315,11 @@ class _Problem:
             [T_G_ref[j] for _, j, *_ in sources]
         )
         reference_poses = [T_G_ref[j] for _, j, *_ in reference]
+        source_poses = [T_G_ref[j] @ T_ref_lidar[i] for i, j, *_ in sources]
         return _Placed(
             source_ref,
             source_G,
+            self.sources.transformed(source_poses, self.source_normals),
             self.reference.transformed(reference_poses),
             self.reference.transformed(reference_poses, self.reference_normals),
         )
@@ -321,7 +338,7 @@ class _Problem:
         if len(cross):
             distance, index = tree.query(placed.source_G[cross], k=1)
             cross_error = float(np.mean(distance))
-            keep = distance < gate
+            keep = (distance < gate) & self._compatible(placed, cross, index)
             sources.append(cross[keep])
             targets.append(index[keep].astype(np.int64))
         own = np.flatnonzero(self.sources.lidar == 0)
@@ -336,14 +353,26 @@ class _Problem:
                 self.reference.stop[np.where(found, index, 0)] != self.sources.stop[own][:, None]
             )
             first = np.argmax(other, axis=1)
+            nearest = index[np.arange(len(own)), first]
             keep = other[np.arange(len(own)), first]
+            keep[keep] &= self._compatible(placed, own[keep], nearest[keep])
             sources.append(own[keep])
-            targets.append(index[np.arange(len(own)), first][keep].astype(np.int64))
+            targets.append(nearest[keep].astype(np.int64))
         return _Pairs(
             np.concatenate(sources) if sources else empty,
             np.concatenate(targets) if targets else empty,
             cross_error,
         )
+
+    def _compatible(
+        self, placed: _Placed, source: NDArray[np.int64], target: NDArray[np.int64]
+    ) -> NDArray[np.bool_]:
+        """Pairs whose surfaces face the same way (within `max_normal_angle_deg`)."""
+        if self.config.max_normal_angle_deg is None:
+            return np.ones(len(source), dtype=bool)
+        cos = np.einsum("ni,ni->n", placed.source_normals_G[source], placed.normals_G[target])
+        result: NDArray[np.bool_] = cos >= np.cos(np.radians(self.config.max_normal_angle_deg))
+        return result
 
     # -- residuals ---------------------------------------------------------------------------
 

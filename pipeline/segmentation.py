@@ -72,6 +72,12 @@ class SegmentationConfig(BaseModel):
     surface_neighbours: int = Field(
         default=30, ge=3, description="neighbours whose plane gives an object point's normal"
     )
+    surface_centre_neighbours: int | None = Field(
+        default=10,
+        ge=1,
+        description="the local plane passes through the centroid of this many nearest points "
+        "(fewer than surface_neighbours flattens curved objects less); None: all of them",
+    )
     min_incidence_cos: float = Field(
         default=0.12,
         ge=0,
@@ -262,7 +268,9 @@ def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig)
     objects = candidates[kept[labels]] if len(labels) else candidates
     normals = np.zeros((0, 3))
     if len(objects) >= 3:
-        projected, normals = local_planes(objects, config.surface_neighbours)
+        projected, normals = local_planes(
+            objects, config.surface_neighbours, config.surface_centre_neighbours
+        )
         # The sensor sits at the origin: the beam to p is p / |p|.
         cos = np.abs(np.einsum("ni,ni->n", normals, objects)) / np.linalg.norm(objects, axis=1)
         seen = cos >= config.min_incidence_cos

@@ -13,13 +13,17 @@ from pykdtree.kdtree import KDTree
 from pipeline.transforms import Points
 
 
-def local_planes(points: Points, neighbours: int) -> tuple[Points, Points]:
-    """Each point projected onto the plane fitted to its `neighbours` nearest points, and that
-    plane's unit normal: (N, 3) and (N, 3).
+def local_planes(
+    points: Points, neighbours: int, centre_neighbours: int | None = None
+) -> tuple[Points, Points]:
+    """Each point projected onto its local plane, and that plane's unit normal: (N, 3), (N, 3).
 
-    The projection removes the range noise across the surface while keeping the sampling along
-    it; without it the nearest noisy neighbour is biased towards the query point, which shrinks
-    every residual and makes the iterations crawl.
+    The normal is the least-spread direction of the `neighbours` nearest points; the plane goes
+    through the centroid of the `centre_neighbours` nearest (all `neighbours` when None). The
+    projection removes the range noise across the surface while keeping the sampling along it;
+    without it the nearest noisy neighbour is biased towards the query point, which shrinks every
+    residual and makes the iterations crawl. A smaller centring patch flattens curved surfaces
+    (cylinders, capsules) less: the flattening depends on the viewpoint and biases the fit.
     """
     if len(points) < 3:
         return points.copy(), np.tile(np.array([0.0, 0.0, 1.0]), (len(points), 1))
@@ -39,6 +43,10 @@ def local_planes(points: Points, neighbours: int) -> tuple[Points, Points]:
     covariance[:, 0, 2] = covariance[:, 2, 0] = np.einsum("nk,nk->n", x, z)
     covariance[:, 1, 2] = covariance[:, 2, 1] = np.einsum("nk,nk->n", y, z)
     normals = smallest_eigenvectors(covariance)
+    if centre_neighbours is not None and centre_neighbours < k:
+        # pykdtree returns the neighbours nearest first.
+        near = idx[:, :centre_neighbours]
+        centroid = np.column_stack([points[:, axis][near].mean(axis=1) for axis in range(3)])
     offset = np.einsum("ni,ni->n", normals, points - centroid)
     return points - offset[:, None] * normals, normals
 
@@ -71,4 +79,11 @@ def smallest_eigenvectors(covariance: NDArray[np.float64]) -> Points:
     vectors[length < 1e-300] = (0.0, 0.0, 1.0)
     length[length < 1e-300] = 1.0
     result: Points = vectors / length[:, None]
+    return result
+
+
+def orient_towards_origin(points: Points, normals: Points) -> Points:
+    """`normals` (N, 3) flipped where needed to face the origin (the sensor) from `points`."""
+    flip = np.einsum("ni,ni->n", normals, points) > 0
+    result: Points = np.where(flip[:, None], -normals, normals)
     return result

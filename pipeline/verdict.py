@@ -18,10 +18,12 @@ class VerdictConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     max_metric_error_m: float = Field(
-        default=0.02,
+        default=0.04,
         gt=0,
-        description="eq. 12 after calibration; it includes the point spacing (~5-10 mm at 2 cm "
-        "voxels), so it catches gross misalignment while the stddev checks judge precision",
+        description="eq. 12 after calibration. It includes the point spacing and the parts of "
+        "objects one LiDAR saw and the reference did not (~6 mm on set 1, ~30 mm on the driven "
+        "loop with the true extrinsics), so it catches gross misalignment; the stddev checks "
+        "judge precision",
     )
     max_translation_stddev_m: float = Field(default=0.005, gt=0, description="per axis, per LiDAR")
     max_rotation_stddev_deg: float = Field(default=0.1, gt=0, description="per axis, per LiDAR")
