@@ -4,6 +4,8 @@ records them (the recordings themselves need not exist)."""
 from __future__ import annotations
 
 import uuid
+from datetime import timedelta
+from typing import Any
 
 from service import repository
 from service.db import Database
@@ -53,3 +55,20 @@ def enqueue(
     return enqueue_many(
         db, 1, prefix=robot_id, kind=kind, max_attempts=max_attempts, config=config
     )[0]
+
+
+def finished_run(
+    db: Database,
+    document: dict[str, Any],
+    robot_id: str = "R1",
+    *,
+    kind: RunKind = RunKind.END_OF_LINE,
+) -> uuid.UUID:
+    """A run of `robot_id` that a worker has claimed and completed with `document`."""
+    from workers import queue
+
+    run_id = enqueue(db, robot_id, kind=kind)
+    held = queue.claim(db, "test-worker", timedelta(minutes=1))
+    assert held is not None and held.run_id == run_id, "the queue held another run"
+    queue.complete(db, held, document)
+    return run_id

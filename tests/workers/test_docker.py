@@ -116,6 +116,7 @@ def test_migrate_brings_an_empty_database_to_the_newest_schema(migrated_pg: str)
 
 
 @pytest.mark.postgres
+@pytest.mark.slow
 def test_api_serves_until_sigterm(migrated_pg: str, tmp_path: Path) -> None:
     port = free_port()
     env = entrypoint_env(
@@ -148,6 +149,7 @@ def test_api_serves_until_sigterm(migrated_pg: str, tmp_path: Path) -> None:
 
 
 @pytest.mark.postgres
+@pytest.mark.slow
 def test_worker_calibrates_queued_runs_until_sigterm(migrated_pg: str, tmp_path: Path) -> None:
     settings = Settings(database_url=migrated_pg)
     db = Database.from_settings(settings)

@@ -3,10 +3,13 @@
 
 from __future__ import annotations
 
+import pytest
+
 from service.settings import Settings
 from tests.bench.bench_queue import LIDARS_PER_RESULT, drain
 
 
+@pytest.mark.slow
 def test_worker_processes_drain_the_queue_none_lost_none_twice(settings: Settings) -> None:
     result = drain(settings, runs=30, workers=2, timeout=300)
     assert result.succeeded == 30 and result.lost == 0

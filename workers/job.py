@@ -1,0 +1,115 @@
+"""One attempt of a run, as the pool's child process runs it: fetch the recording from storage,
+read it, calibrate it with the robot's tolerances in the verdict, compare the extrinsics with the
+reference poses, and return the `result.json` document with the worker's stage timings.
+
+Only the pool's children import this module (the fork server preloads it, so the numerical core
+is imported once per worker, not once per child); the worker's parent never does.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from pipeline.calibrate import STAGES, calibrate
+from pipeline.config import PipelineConfig, config_from_mapping
+from pipeline.errors import ConfigError
+from pipeline.io import read_recording
+from pipeline.result import result_document
+from service.settings import Settings
+from service.storage import Storage, make_storage
+from workers import drift
+from workers.context import JobSpec
+from workers.pool import Report
+
+_SUFFIXES = {
+    "mcap": ".mcap",
+    "sqlite3": ".db3",
+    "ros1": ".bag",
+    "zip": ".zip",
+    "tar": ".tar",
+    "tar.gz": ".tar.gz",
+}
+
+
+@cache
+def _storage(settings: Settings) -> Storage:
+    # One client per child process and storage: S3 clients are costly to build.
+    return make_storage(settings)
+
+
+# Where each stage starts, as a fraction of a typical run (the joint optimisation dominates).
+_STAGE_PROGRESS = {
+    "download": 0.01,
+    "read": 0.03,
+    "downsample": 0.05,
+    "denoise": 0.06,
+    "segmentation": 0.14,
+    "rough_refinement": 0.2,
+    "optimisation": 0.22,
+    "metric": 0.92,
+    "observability": 0.94,
+    "verdict": 0.96,
+    "drift": 0.98,
+}
+# The tolerance profile's limits that are the pipeline verdict's own (`VerdictConfig`); the drift
+# and design limits are checked here, after the pipeline (`workers.drift`).
+_VERDICT_LIMITS = ("max_metric_error_m", "max_translation_stddev_m", "max_rotation_stddev_deg")
+
+
+def pipeline_config_for(
+    run_config: dict[str, Any] | None, limits: dict[str, Any]
+) -> PipelineConfig:
+    """The `PipelineConfig` of a run: the upload's config (`X-Fleetcal-Config`: reference LiDAR,
+    initial extrinsics, reader and stage settings) with the verdict's limits from the robot's
+    tolerance profile. The upload may not set the verdict: a robot must not loosen its own."""
+    data = dict(run_config or {})
+    if "verdict" in data:
+        raise ConfigError(
+            "the upload's config sets 'verdict'; a run's tolerances come from the robot's "
+            "tolerance profile (PUT /v1/tolerance-profiles/{name}), remove 'verdict'"
+        )
+    data["verdict"] = {name: limits[name] for name in _VERDICT_LIMITS if name in limits}
+    return config_from_mapping(data)
+
+
+def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
+    """Download, read and calibrate the run's recording; the `result.json` document."""
+
+    reached = [0.0]
+
+    def stage(name: str) -> None:
+        reached[0] = _STAGE_PROGRESS.get(name, reached[0])
+        report(name, reached[0])
+
+    def after(finished: str, *details: object) -> None:
+        # `calibrate` reports a stage when it ends; the run is then in the next one.
+        index = STAGES.index(finished) if finished in STAGES else len(STAGES)
+        if index + 1 < len(STAGES):
+            stage(STAGES[index + 1])
+
+    config = pipeline_config_for(spec.config, spec.context.limits)
+    with tempfile.TemporaryDirectory(prefix="fleetcal-run-") as scratch:
+        stage("download")
+        started = time.perf_counter()
+        path = Path(scratch) / f"recording{_SUFFIXES.get(spec.upload_format, '')}"
+        _storage(spec.settings).download(spec.storage_key, path)
+        download_seconds = time.perf_counter() - started
+
+        stage("read")
+        started = time.perf_counter()
+        problem = read_recording(path, config.reader)
+        read_seconds = time.perf_counter() - started
+
+    stage(STAGES[0])
+    result = calibrate(problem, config, progress=after)
+    document = result_document(result, read_seconds=read_seconds)
+    document["stages"] = {"download": {"seconds": download_seconds}, **document["stages"]}
+    document["tolerance_profile"] = spec.context.profile
+    if spec.context.reference is not None:
+        stage("drift")
+        document = drift.compare(document, spec.context.reference)
+    return document
