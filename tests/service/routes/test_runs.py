@@ -223,7 +223,7 @@ def test_concurrent_uploads_with_one_idempotency_key_make_one_run(api: Api) -> N
     )
     answers: list[Any] = []
     second = threading.Thread(
-        target=lambda: answers.append(api.upload("R1", **{"Idempotency-Key": "race"}))
+        target=lambda: answers.append(api.upload("R1", recording(), **{"Idempotency-Key": "race"}))
     )
     second.start()
     second.join(1.0)
