@@ -94,11 +94,13 @@ def report_input(
     problem: CalibrationProblem,
     result: CalibrationResult,
     *,
+    passed: bool | None = None,
     max_points: int = 400_000,
     seed: int = 0,
 ) -> ReportInput:
     """The images' data for `result`, calibrated from `problem`; at most about `max_points`
-    points in each map (a random subset of each stop cloud, the same one before and after)."""
+    points in each map (a random subset of each stop cloud, the same one before and after).
+    `passed`: the run's final verdict when checks beyond the pipeline's (drift) decide it."""
     frames = tuple(lidar.frame for lidar in result.lidars)
     initial = [problem.lidar(frame).T_base_lidar for frame in frames]
     odometry = np.stack([stop.T_odom_base for stop in problem.stops])
@@ -114,7 +116,7 @@ def report_input(
         error_per_iteration=tuple(result.error_per_iteration),
         metric_error_initial=result.metric_error_initial,
         metric_error_final=result.metric_error_final,
-        passed=result.passed,
+        passed=result.passed if passed is None else passed,
         converged=result.converged,
     )
 
@@ -136,9 +138,12 @@ def _subsample(
     return tuple(rows)
 
 
-def render_report(problem: CalibrationProblem, result: CalibrationResult) -> dict[str, bytes]:
-    """The PNG images of `REPORT_IMAGES` for a calibration of `problem`, by name."""
-    return render(report_input(problem, result))
+def render_report(
+    problem: CalibrationProblem, result: CalibrationResult, *, passed: bool | None = None
+) -> dict[str, bytes]:
+    """The PNG images of `REPORT_IMAGES` for a calibration of `problem`, by name (`passed`: the
+    run's final verdict, if not the pipeline's)."""
+    return render(report_input(problem, result, passed=passed))
 
 
 def render(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[str, bytes]:

@@ -8,22 +8,28 @@ is imported once per worker, not once per child); the worker's parent never does
 
 from __future__ import annotations
 
+import logging
 import tempfile
 import time
 from functools import cache
 from pathlib import Path
 from typing import Any
 
-from pipeline.calibrate import STAGES, calibrate
+from pipeline.calibrate import STAGES, CalibrationResult, calibrate
 from pipeline.config import PipelineConfig, config_from_mapping
 from pipeline.errors import ConfigError
 from pipeline.io import read_recording
+from pipeline.problem import CalibrationProblem
+from pipeline.report import render_report
 from pipeline.result import result_document
+from service.reports import store_report_images
 from service.settings import Settings
 from service.storage import Storage, make_storage
 from workers import drift
 from workers.context import JobSpec
 from workers.pool import Report
+
+log = logging.getLogger(__name__)
 
 _SUFFIXES = {
     "mcap": ".mcap",
@@ -54,6 +60,7 @@ _STAGE_PROGRESS = {
     "observability": 0.94,
     "verdict": 0.96,
     "drift": 0.98,
+    "report": 0.99,
 }
 # The tolerance profile's limits that are the pipeline verdict's own (`VerdictConfig`); the drift
 # and design limits are checked here, after the pipeline (`workers.drift`).
@@ -112,4 +119,22 @@ def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
     if spec.context.reference is not None:
         stage("drift")
         document = drift.compare(document, spec.context.reference)
+    stage("report")
+    document["report"] = _report_images(spec, problem, result, document["verdict"]["passed"])
     return document
+
+
+def _report_images(
+    spec: JobSpec, problem: CalibrationProblem, result: CalibrationResult, passed: bool
+) -> dict[str, Any]:
+    """Draw the run's report images and store them with the run (`service.reports`). A drawing
+    failure is noted in the result and never costs a good calibration; a storage error goes to
+    the retry policy like any other."""
+    started = time.perf_counter()
+    try:
+        images = render_report(problem, result, passed=passed)
+    except Exception as err:
+        log.exception("run %s: the report images could not be drawn", spec.run_id)
+        return {"images": [], "error": f"the report images could not be drawn ({err})"}
+    names = store_report_images(_storage(spec.settings), spec.run_id, images)
+    return {"images": names, "seconds": time.perf_counter() - started}
