@@ -120,7 +120,9 @@ def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
         stage("drift")
         document = drift.compare(document, spec.context.reference)
     stage("report")
+    started = time.perf_counter()
     document["report"] = _report_images(spec, problem, result, document["verdict"]["passed"])
+    document["stages"]["report"] = {"seconds": time.perf_counter() - started}
     return document
 
 
@@ -130,11 +132,9 @@ def _report_images(
     """Draw the run's report images and store them with the run (`service.reports`). A drawing
     failure is noted in the result and never costs a good calibration; a storage error goes to
     the retry policy like any other."""
-    started = time.perf_counter()
     try:
         images = render_report(problem, result, passed=passed)
     except Exception as err:
         log.exception("run %s: the report images could not be drawn", spec.run_id)
         return {"images": [], "error": f"the report images could not be drawn ({err})"}
-    names = store_report_images(_storage(spec.settings), spec.run_id, images)
-    return {"images": names, "seconds": time.perf_counter() - started}
+    return {"images": store_report_images(_storage(spec.settings), spec.run_id, images)}

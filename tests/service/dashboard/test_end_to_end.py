@@ -88,6 +88,7 @@ def test_the_worker_stores_the_report_images(served_run: Served) -> None:
     ) as client:
         run = client.get(f"/v1/runs/{served_run.run_id}").json()
         assert run["result"]["report"]["images"] == ["map-top", "map-side", "error"]
+        assert run["result"]["stages"]["report"]["seconds"] > 0
         index = client.get(f"/v1/runs/{served_run.run_id}/report").json()
         assert [image["name"] for image in index["images"]] == ["map-top", "map-side", "error"]
         png = client.get(index["images"][0]["url"])
