@@ -210,3 +210,13 @@ def test_a_worker_waits_out_an_unreachable_database(
             "two failed claims, each followed by a pause",
             lambda: sum("next try in" in r.message for r in caplog.records) >= 2,
         )
+
+
+def test_the_heartbeat_keeps_a_run_longer_than_its_lease(settings: Settings, db: Database) -> None:
+    """The run takes 2.5 leases; the worker's own reaper runs meanwhile and must leave it alone."""
+    short_lease = settings.model_copy(update={"run_lease_seconds": 2})
+    run_id = enqueue(db, config={"sleep": 5})
+    with running_worker(short_lease):
+        wait_for("the run", finished(db, run_id))
+    row = run_row(db, run_id)
+    assert row.status == RunStatus.SUCCEEDED and row.attempts == 1, "never reaped"
