@@ -27,11 +27,11 @@ def wait_for(browser: Any, css: str, count: int = 1) -> list[Any]:
     return result
 
 
-def open_page(browser: Any, live_app: LiveApp, route: str) -> None:
+def open_page(browser: Any, base_url: str, route: str) -> None:
     """Go to the dashboard's `route` (e.g. `/robots/R1`) and wait until it has been drawn."""
     from selenium.webdriver.support.ui import WebDriverWait
 
-    target = f"{live_app.url}/#{route}"
+    target = f"{base_url}/#{route}"
     browser.execute_script(
         "const a = document.getElementById('app'); if (a) a.dataset.ready = 'stale'"
     )
@@ -88,7 +88,7 @@ def test_the_overview_lists_the_robots_with_their_latest_run(
     signed_in: Any, live_app: LiveApp, artifacts_dir: Path
 ) -> None:
     browser = signed_in
-    open_page(browser, live_app, "/")
+    open_page(browser, live_app.url, "/")
     rows = wait_for(browser, "table#fleet tbody tr", count=3)
     by_robot = {row.get_attribute("data-robot-id"): row for row in rows}
     assert sorted(by_robot) == ["R1", "R2", "R3"]
@@ -100,7 +100,7 @@ def test_the_overview_lists_the_robots_with_their_latest_run(
     assert by_robot["R2"].find_element("css selector", "[data-status]").text == "failed"
     assert by_robot["R3"].find_element("css selector", "[data-status]").text == "running"
     # The key was entered once: a reload keeps it (session storage), no form again.
-    open_page(browser, live_app, "/")
+    open_page(browser, live_app.url, "/")
     assert len(wait_for(browser, "table#fleet tbody tr", count=3)) == 3
     screenshot(browser, artifacts_dir, "overview")
 
@@ -109,7 +109,7 @@ def test_the_robot_page_charts_each_lidar_against_its_tolerance(
     signed_in: Any, live_app: LiveApp, artifacts_dir: Path
 ) -> None:
     browser = signed_in
-    open_page(browser, live_app, "/robots/R1")
+    open_page(browser, live_app.url, "/robots/R1")
     charts = wait_for(browser, "#extrinsics svg.chart", count=4)
     for chart in charts:
         # Three runs, three axes: nine points, each drawn with its size (the chart rendered).
@@ -132,7 +132,7 @@ def test_a_passed_run_shows_its_verdict_checks_and_images(
 ) -> None:
     browser = signed_in
     run = live_app.fleet.repaired
-    open_page(browser, live_app, f"/runs/{run}")
+    open_page(browser, live_app.url, f"/runs/{run}")
     verdict = wait_for(browser, "#verdict [data-verdict]")[0]
     assert verdict.get_attribute("data-verdict") == "passed"
     assert "20.3 mm before" in wait_for(browser, "#metric-error")[0].text
@@ -160,7 +160,7 @@ def test_a_failed_run_names_its_failed_check(
     signed_in: Any, live_app: LiveApp, artifacts_dir: Path
 ) -> None:
     browser = signed_in
-    open_page(browser, live_app, f"/runs/{live_app.fleet.hit}")
+    open_page(browser, live_app.url, f"/runs/{live_app.fleet.hit}")
     assert wait_for(browser, "#verdict [data-verdict]")[0].get_attribute("data-verdict") == "failed"
     failed = wait_for(browser, "#checks tr.failed-row", count=2)
     assert {row.get_attribute("data-check") for row in failed} == {
@@ -175,7 +175,7 @@ def test_a_failed_run_names_its_failed_check(
 
 def test_a_running_run_shows_its_progress(signed_in: Any, live_app: LiveApp) -> None:
     browser = signed_in
-    open_page(browser, live_app, f"/runs/{live_app.fleet.running}")
+    open_page(browser, live_app.url, f"/runs/{live_app.fleet.running}")
     # The card is redrawn every second while the run is running: read it in one script.
     text, value = browser.execute_script(
         "const card = document.getElementById('progress');"
@@ -188,6 +188,6 @@ def test_a_running_run_shows_its_progress(signed_in: Any, live_app: LiveApp) -> 
 
 def test_a_run_that_failed_shows_its_problem(signed_in: Any, live_app: LiveApp) -> None:
     browser = signed_in
-    open_page(browser, live_app, f"/runs/{live_app.fleet.failed}")
+    open_page(browser, live_app.url, f"/runs/{live_app.fleet.failed}")
     error = wait_for(browser, "#run-error")[0]
     assert "no stops found in the trajectory" in error.text
