@@ -5,6 +5,7 @@ killed with SIGKILL mid-run loses nothing and duplicates nothing."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -15,6 +16,7 @@ import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import timedelta
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -28,6 +30,7 @@ from service.auth import create_key
 from service.db import Database
 from service.models import LidarExtrinsic, Result, RunStatus, Scope
 from service.settings import Settings
+from tests.service.conftest import scratch_pg_database
 from tests.service.documents import result_document
 from tests.workers.runs import finished_run
 from tests.workers.test_docker import ROOT, entrypoint_env
@@ -101,6 +104,7 @@ class Fleet:
         return self.robot.get(f"/v1/runs/{run_id}").json(), seen
 
 
+@contextlib.contextmanager
 def make_fleet(settings: Settings, base_url: str) -> Iterator[Fleet]:
     db = Database.from_settings(settings)
     db.upgrade()
@@ -121,15 +125,21 @@ def make_fleet(settings: Settings, base_url: str) -> Iterator[Fleet]:
 def embedded(settings: Settings) -> Iterator[Fleet]:
     """`fleetcal serve` in this process: the API and one pipeline process."""
     options = WorkerOptions(poll_interval=timedelta(milliseconds=100))
-    with EmbeddedService(settings, port=0, workers=1, options=options) as service:
-        yield from make_fleet(settings, service.url)
+    with (
+        EmbeddedService(settings, port=0, workers=1, options=options) as service,
+        make_fleet(settings, service.url) as fleet,
+    ):
+        yield fleet
 
 
 @pytest.fixture
 def api_only(settings: Settings) -> Iterator[Fleet]:
     """The API alone: the test starts and kills its workers."""
-    with EmbeddedService(settings, port=0, workers=0) as service:
-        yield from make_fleet(settings, service.url)
+    with (
+        EmbeddedService(settings, port=0, workers=0) as service,
+        make_fleet(settings, service.url) as fleet,
+    ):
+        yield fleet
 
 
 def pose(entry: dict[str, Any]) -> tuple[list[float], list[float]]:
@@ -277,3 +287,66 @@ def test_a_worker_killed_mid_run_loses_nothing_and_duplicates_nothing(
     assert result_rows(fleet.db, run_id) == (1, len(determined)), "one result, a row per LiDAR"
     history = fleet.robot.get(f"/v1/robots/{ROBOT}/history").json()
     assert sorted(item["frame"] for item in history["items"]) == determined
+
+
+@pytest.mark.postgres
+@pytest.mark.slow
+def test_the_distributed_setup_postgresql_and_s3(
+    s3_endpoint: str, tiny_recording: bytes, tmp_path: Path
+) -> None:
+    """The compose deployment without Docker: PostgreSQL, an S3-compatible server, the API, and a
+    separate `fleetcal worker` process that reads the recording from the bucket."""
+    import boto3
+
+    credentials = {
+        "AWS_ACCESS_KEY_ID": "test",
+        "AWS_SECRET_ACCESS_KEY": "test",
+        "AWS_DEFAULT_REGION": "us-east-1",
+    }
+    bucket = f"fleetcal-{uuid.uuid4().hex[:8]}"
+    boto3.client(
+        "s3",
+        endpoint_url=s3_endpoint,
+        aws_access_key_id="test",
+        aws_secret_access_key="test",
+        region_name="us-east-1",
+    ).create_bucket(Bucket=bucket)
+    with scratch_pg_database() as database_url, pytest.MonkeyPatch.context() as patch:
+        for name, value in credentials.items():
+            patch.setenv(name, value)
+        settings = Settings(
+            data_dir=tmp_path / "data",
+            database_url=database_url,
+            storage_url=f"s3://{bucket}/recordings",
+            s3_endpoint_url=s3_endpoint,
+            max_upload_bytes=256 * 1024 * 1024,
+        )
+        env = entrypoint_env(
+            FLEETCAL_DATABASE_URL=database_url,
+            FLEETCAL_STORAGE_URL=settings.resolved_storage_url,
+            FLEETCAL_S3_ENDPOINT_URL=s3_endpoint,
+            FLEETCAL_MIGRATE_ON_START="false",
+            **credentials,
+        )
+        with (
+            EmbeddedService(settings, port=0, workers=0) as service,
+            make_fleet(settings, service.url) as fleet,
+        ):
+            run_id = fleet.upload(tiny_recording)
+            worker = subprocess.Popen(
+                ["fleetcal", "worker", "--concurrency", "1"],
+                env=env,
+                cwd=ROOT,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            try:
+                run, _ = fleet.follow(run_id)
+            finally:
+                worker.send_signal(signal.SIGTERM)
+                _, err = worker.communicate(timeout=120)
+    assert worker.returncode == 0, err
+    assert run["status"] == "succeeded", run["error"]
+    assert run["result"]["stages"]["download"]["seconds"] >= 0
+    assert not (tmp_path / "data" / "storage").exists(), "nothing went to local storage"
