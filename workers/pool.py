@@ -100,7 +100,8 @@ class Pool:
         self.target = target
         self._context = multiprocessing.get_context("forkserver")
         # Takes effect when the fork server starts (the first child of this process). With
-        # `__main__` preloaded, children do not import the main module again each.
+        # `__main__` preloaded, children do not import the main module again each. Children
+        # inherit the environment the fork server started with, not later changes to it.
         self._context.set_forkserver_preload(["__main__", __name__, target.partition(":")[0]])
         self.slots = [self._spawn(index) for index in range(size)]
 
