@@ -1,0 +1,123 @@
+"""Schemathesis against the app's own OpenAPI document, with a valid admin key, on SQLite and
+PostgreSQL: generated requests for every operation (stateless), then sequences that follow the
+links schemathesis infers from the document (upload -> run -> report/exports, robots -> robot,
+profiles -> profile). No request may get a 5xx, and every answer must match the document."""
+
+from __future__ import annotations
+
+import copy
+import uuid
+from typing import Any
+
+import schemathesis
+from hypothesis import HealthCheck, given, settings
+from schemathesis import checks
+from schemathesis.core.result import Ok
+from schemathesis.specs.openapi.schemas import OpenApiSchema
+
+from service import repository
+from service.models import ApiKey, Base
+from tests.service.conftest import Api, recording
+from tests.service.documents import result_document
+
+EXAMPLES = 10
+# Schema-valid is not always valid here: an upload body is any bytes to the schema but must be a
+# recording (415), a cursor any string but one the API made (400). Every other check stays on.
+EXCLUDED = [checks.positive_data_acceptance]
+FUZZ_SETTINGS = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    database=None,
+    derandomize=True,
+    suppress_health_check=list(HealthCheck),
+)
+
+
+def seed(api: Api) -> None:
+    """A robot, a queued run and a finished one, for requests to find (after any earlier state
+    but the keys is removed: a stateful sequence must meet the same service each time it runs)."""
+    with api.services.db.transaction() as session:
+        for table in reversed(Base.metadata.sorted_tables):
+            if table is not ApiKey.__table__:
+                session.execute(table.delete())
+    for _ in range(2):
+        response = api.upload("R1", recording())
+        assert response.status_code == 202, response.text
+    with api.services.db.transaction() as session:
+        repository.store_result(session, uuid.UUID(response.json()["id"]), result_document())
+
+
+def app_schema(api: Api, *, links: bool = False) -> OpenApiSchema:
+    """The app's OpenAPI document for schemathesis, calling the app in this process.
+
+    With `links`, the document gains one link schemathesis cannot infer: a listed robot's id to
+    an upload for it (an upload's path names a robot; its body is binary, so it is no entry point
+    of schemathesis' sequences). The links from the upload on (to the run, its report and its
+    exports) are inferred."""
+    app: Any = api.client.app
+    document = copy.deepcopy(app.openapi())
+    if links:
+        listed = document["paths"]["/v1/robots"]["get"]["responses"]["200"]
+        listed["links"] = {
+            "UploadForListedRobot": {
+                "operationRef": "#/paths/~1v1~1robots~1{robot_id}~1runs/post",
+                "parameters": {"robot_id": "$response.body#/items/0/id"},
+            }
+        }
+    schema = schemathesis.openapi.from_dict(document)
+    schema.app = app
+    return schema
+
+
+def test_every_operation_answers_generated_requests_without_server_errors(api: Api) -> None:
+    seed(api)
+    schema = app_schema(api)
+    headers = api.headers("admin")
+    operations = [result.ok() for result in schema.get_all_operations() if isinstance(result, Ok)]
+    assert len(operations) >= 16, [op.label for op in operations]
+    for operation in operations:
+
+        @FUZZ_SETTINGS
+        @given(case=operation.as_strategy())
+        def check(case: Any) -> None:
+            case.call_and_validate(headers=headers, excluded_checks=EXCLUDED)
+
+        check()
+
+
+def test_linked_sequences_keep_the_service_consistent(api: Api) -> None:
+    schema = app_schema(api, links=True)
+    inference = schema.apply_stateful_inference(None)
+    assert inference.selected >= 10, "upload -> run, robots -> robot, ... links are inferred"
+    headers = api.headers("admin")
+    answered: set[tuple[str, int]] = set()
+
+    class Workflow(schema.as_state_machine()):  # type: ignore[misc]
+        def setup(self) -> None:
+            seed(api)
+
+        def before_call(self, case: Any) -> None:
+            if case.operation.label == "POST /v1/robots/{robot_id}/runs":
+                # Random bytes are never a recording (415): upload a real one so that the
+                # sequence goes on to the run, its report and its exports.
+                case.body = recording()
+
+        def get_call_kwargs(self, case: Any) -> dict[str, Any]:
+            return {"headers": headers}
+
+        def validate_response(self, response: Any, case: Any, **kwargs: Any) -> None:
+            answered.add((case.operation.label, response.status_code))
+            case.validate_response(response, excluded_checks=EXCLUDED, headers=headers)
+
+    # Not derandomized: schemathesis' link choices draw from a true random source.
+    Workflow.run(
+        settings=settings(
+            FUZZ_SETTINGS,
+            max_examples=30,
+            stateful_step_count=10,
+            derandomize=False,
+        )
+    )
+    # The links were followed: a listed robot got an upload (only a link leads there). How far
+    # each sequence goes on from it (run, report, exports) is schemathesis' random choice.
+    assert ("POST /v1/robots/{robot_id}/runs", 202) in answered, sorted(answered)
