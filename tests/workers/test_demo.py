@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.workers.test_docker import ROOT, entrypoint_env
+from tests.workers.runs import ROOT, entrypoint_env
 
 
 @pytest.mark.slow

@@ -8,7 +8,6 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -22,10 +21,8 @@ from service.models import RunStatus
 from service.settings import Settings
 from tests.service.conftest import scratch_pg_database
 from tests.workers.jobs import SCRIPTED
-from tests.workers.runs import enqueue
-from tests.workers.test_worker import run_row, wait_for
+from tests.workers.runs import ROOT, enqueue, entrypoint_env, run_row, wait_for
 
-ROOT = Path(__file__).resolve().parents[2]
 DOCKER = ROOT / "docker"
 ENTRYPOINT = DOCKER / "entrypoint.sh"
 
@@ -75,16 +72,6 @@ def test_the_image_runs_the_entrypoint() -> None:
     assert 'ENTRYPOINT ["fleetcal-entrypoint"]' in dockerfile
     assert "libusb-1.0-0" in dockerfile, "open3d cannot load without it"
     assert os.access(ENTRYPOINT, os.X_OK)
-
-
-def entrypoint_env(**settings: str) -> dict[str, str]:
-    """This machine's environment for a role, with `fleetcal` from the virtualenv on the PATH
-    (as in the image) and the repository importable (for the test job)."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("FLEETCAL_")}
-    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
-    env["PYTHONPATH"] = str(ROOT)
-    env.update(settings)
-    return env
 
 
 def free_port() -> int:

@@ -32,9 +32,14 @@ from service.models import LidarExtrinsic, Result, RunStatus, Scope
 from service.settings import Settings
 from tests.service.conftest import scratch_pg_database
 from tests.service.documents import result_document
-from tests.workers.runs import finished_run
-from tests.workers.test_docker import ROOT, entrypoint_env
-from tests.workers.test_worker import run_row, running_worker, wait_for
+from tests.workers.runs import (
+    ROOT,
+    entrypoint_env,
+    finished_run,
+    run_row,
+    running_worker,
+    wait_for,
+)
 from workers.embedded import EmbeddedService
 from workers.worker import CALIBRATE_JOB, WorkerOptions
 

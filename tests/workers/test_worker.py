@@ -3,64 +3,22 @@ so that each outcome (success, bad input, crashes, slow runs, stop requests) is 
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import socket
-import threading
-import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from datetime import timedelta
 from pathlib import Path
-from typing import Any
 
 import pytest
 from sqlalchemy import func, select
 
 from service.db import Database
-from service.models import Result, Run, RunStatus
+from service.models import Result, RunStatus
 from service.settings import Settings
-from tests.workers.jobs import SCRIPTED
-from tests.workers.runs import enqueue
-from workers.policy import RetryPolicy
+from tests.workers.runs import enqueue, run_row, running_worker, wait_for
 from workers.pool import BLAS_THREAD_VARIABLES, PoolError
 from workers.worker import Worker, WorkerOptions
-
-FAST_RETRY = RetryPolicy(backoff_base=timedelta(milliseconds=50), jitter=0)
-
-
-@contextlib.contextmanager
-def running_worker(settings: Settings, **options: Any) -> Iterator[Worker]:
-    defaults: dict[str, Any] = {
-        "job": SCRIPTED,
-        "poll_interval": timedelta(milliseconds=50),
-        "retry": FAST_RETRY,
-    }
-    worker = Worker(settings, WorkerOptions(**(defaults | options)))
-    thread = threading.Thread(target=worker.run, name="test-worker")
-    thread.start()
-    try:
-        yield worker
-    finally:
-        worker.request_stop(now=True)
-        thread.join(60)
-        assert not thread.is_alive()
-
-
-def wait_for(what: str, predicate: Callable[[], bool], timeout: float = 60) -> None:
-    """Poll until `predicate` holds; the timeout only keeps a broken worker from hanging CI."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"still waiting for {what} after {timeout} s")
-        time.sleep(0.05)
-
-
-def run_row(db: Database, run_id: uuid.UUID) -> Run:
-    with db.session() as session:
-        run = session.get(Run, run_id)
-        assert run is not None
-        return run
 
 
 def finished(db: Database, *run_ids: uuid.UUID) -> Callable[[], bool]:
