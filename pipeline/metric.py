@@ -1,8 +1,10 @@
 """The metric error (paper eq. 12): how far the calibrated LiDARs' maps lie from the reference map.
 
-Exactly which points enter: the *object* points of segmentation (stage 2, voxelised to
-`segmentation.voxel_size_m`, floor removed, small clusters dropped), of every stop, placed in the
-global frame G with the poses being judged (`T_G_ref(stop) @ T_ref_lidar`). The reference map is
+Exactly which points enter: the *object* points of segmentation (stage 2: at least
+`object_min_height_m` above the floor, voxelised to `voxel_size_m`, in clusters of at least
+`min_cluster_points`, projected onto their local plane, edge-on points dropped), of every stop,
+placed in the global frame G with the poses being judged (`T_G_ref(stop) @ T_ref_lidar`); the
+same points before and after calibration, only the poses differ. The reference map is
 the reference LiDAR's object points of all stops; every object point of every other LiDAR
 contributes its Euclidean distance to its nearest neighbour in that map, capped at
 `max_distance_m` (so parts of an object the reference never saw count as "far", not as

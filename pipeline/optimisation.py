@@ -67,6 +67,11 @@ class OptimisationConfig(BaseModel):
         default=0.01, gt=0, description="standard deviation of a point residual"
     )
     reference_self_consistency: bool = True
+    lidar_self_consistency: bool = Field(
+        default=False,
+        description="every LiDAR's object map kept self-consistent across stops, not only the "
+        "reference's: more constraints on the stop poses",
+    )
     floor_terms: bool = True
     floor_normal_sigma_deg: float = Field(default=0.02, gt=0)
     floor_offset_sigma_m: float = Field(default=0.001, gt=0)
@@ -221,11 +226,12 @@ def robust_weight_and_cost(
 @dataclass(frozen=True)
 class _Placed:
     """Every cloud placed with one set of poses: sources in the reference frame of their stop
-    (`source_ref`) and in G, the reference map and its normals in G."""
+    (`source_ref`) and in G, the target maps in the same two frames and their normals in G."""
 
     source_ref: Points
     source_G: Points
     source_normals_G: Points
+    reference_ref: Points
     reference_G: Points
     normals_G: Points
 
@@ -284,9 +290,10 @@ class _Problem:
         part_normals = [
             orient_towards_origin(p, n) for (*_, p), n in zip(parts, part_normals, strict=True)
         ]
-        reference = [p for p in parts if p[0] == 0]
-        self.reference = _Clouds.build(reference)
-        reference_normals = [n for (i, *_), n in zip(parts, part_normals, strict=True) if i == 0]
+        # Targets: the reference LiDAR's map, and every LiDAR's own when it is kept consistent.
+        is_target = [p[0] == 0 or config.lidar_self_consistency for p in parts]
+        self.reference = _Clouds.build([p for p, t in zip(parts, is_target, strict=True) if t])
+        reference_normals = [n for n, t in zip(part_normals, is_target, strict=True) if t]
         self.reference_normals = (
             np.concatenate(reference_normals) if reference_normals else np.zeros((0, 3))
         )
@@ -314,13 +321,18 @@ class _Problem:
         source_G = _Clouds(source_ref, self.sources.lidar, self.sources.stop, sources).transformed(
             [T_G_ref[j] for _, j, *_ in sources]
         )
-        reference_poses = [T_G_ref[j] for _, j, *_ in reference]
         source_poses = [T_G_ref[j] @ T_ref_lidar[i] for i, j, *_ in sources]
+        reference_ref = self.reference.transformed([T_ref_lidar[i] for i, *_ in reference])
+        reference_G = _Clouds(
+            reference_ref, self.reference.lidar, self.reference.stop, reference
+        ).transformed([T_G_ref[j] for _, j, *_ in reference])
+        reference_poses = [T_G_ref[j] @ T_ref_lidar[i] for i, j, *_ in reference]
         return _Placed(
             source_ref,
             source_G,
             self.sources.transformed(source_poses, self.source_normals),
-            self.reference.transformed(reference_poses),
+            reference_ref,
+            reference_G,
             self.reference.transformed(reference_poses, self.reference_normals),
         )
 
@@ -330,34 +342,41 @@ class _Problem:
         empty = np.zeros(0, dtype=np.int64)
         if len(self.reference.points) == 0 or len(self.sources.points) == 0:
             return _Pairs(empty, empty, float("nan"))
-        tree = KDTree(placed.reference_G)
         gate = self.config.max_correspondence_m
         sources, targets = [], []
-        cross = np.flatnonzero(self.sources.lidar > 0)
         cross_error = float("nan")
-        if len(cross):
-            distance, index = tree.query(placed.source_G[cross], k=1)
-            cross_error = float(np.mean(distance))
-            keep = (distance < gate) & self._compatible(placed, cross, index)
-            sources.append(cross[keep])
-            targets.append(index[keep].astype(np.int64))
-        own = np.flatnonzero(self.sources.lidar == 0)
-        if len(own):
-            # The nearest reference point seen from *another* stop: a stop's own points would
-            # tie every point to itself. Among the k nearest, take the first from another stop.
-            k = min(self.config.self_neighbours, len(placed.reference_G))
+        for lidar in range(self.layout.n_lidars):
+            rows = np.flatnonzero(self.reference.lidar == lidar)
+            if len(rows) == 0:
+                continue
+            tree = KDTree(placed.reference_G[rows])
+            if lidar == 0:
+                cross = np.flatnonzero(self.sources.lidar > 0)
+                if len(cross):
+                    distance, index = tree.query(placed.source_G[cross], k=1)
+                    cross_error = float(np.mean(distance))
+                    nearest = rows[index.astype(np.int64)]
+                    keep = (distance < gate) & self._compatible(placed, cross, nearest)
+                    sources.append(cross[keep])
+                    targets.append(nearest[keep])
+            own = np.flatnonzero(self.sources.lidar == lidar)
+            if len(own) == 0:
+                continue
+            # The nearest point of the same LiDAR's map seen from *another* stop: a stop's own
+            # points would tie every point to itself. Among the k nearest, the first from
+            # another stop.
+            k = min(self.config.self_neighbours, len(rows))
             distance, index = tree.query(placed.source_G[own], k=k, distance_upper_bound=gate)
-            distance, index = distance.reshape(len(own), k), index.reshape(len(own), k)
-            found = index < len(placed.reference_G)
-            other = found & (
-                self.reference.stop[np.where(found, index, 0)] != self.sources.stop[own][:, None]
-            )
+            index = index.reshape(len(own), k)
+            found = index < len(rows)
+            candidates = rows[np.where(found, index, 0)]
+            other = found & (self.reference.stop[candidates] != self.sources.stop[own][:, None])
             first = np.argmax(other, axis=1)
-            nearest = index[np.arange(len(own)), first]
+            nearest = candidates[np.arange(len(own)), first]
             keep = other[np.arange(len(own)), first]
             keep[keep] &= self._compatible(placed, own[keep], nearest[keep])
             sources.append(own[keep])
-            targets.append(nearest[keep].astype(np.int64))
+            targets.append(nearest[keep])
         return _Pairs(
             np.concatenate(sources) if sources else empty,
             np.concatenate(targets) if targets else empty,
@@ -464,11 +483,12 @@ class _Problem:
         H = np.zeros((layout.size, layout.size))
         b = np.zeros(layout.size)
         placed = self.place(T_G_ref, T_ref_lidar)
-        # Rows grouped by (source cloud, target stop): within a group the three poses involved
-        # are the same, so one small GEMM gives the group's contribution.
+        # Rows grouped by (source cloud, target stop, target LiDAR): within a group the four
+        # poses involved are the same, so one small GEMM gives the group's contribution.
         slice_of = np.searchsorted(self.source_starts, pairs.source, side="right") - 1
         target_stop = self.reference.stop[pairs.target]
-        key = slice_of * layout.n_stops + target_stop
+        target_lidar = self.reference.lidar[pairs.target]
+        key = (slice_of * layout.n_stops + target_stop) * layout.n_lidars + target_lidar
         order = np.argsort(key, kind="stable")
         src, tgt, key = pairs.source[order], pairs.target[order], key[order]
         sorted_pairs = _Pairs(src, tgt, pairs.cross_error)
@@ -478,9 +498,11 @@ class _Problem:
         )
         weight = weight / self.config.point_sigma_m**2
         g, q, m = placed.source_G[src], placed.source_ref[src], placed.reference_G[tgt]
+        q_target = placed.reference_ref[tgt]
         R_stop = T_G_ref[self.sources.stop[src]][:, :3, :3]
+        R_target = T_G_ref[self.reference.stop[tgt]][:, :3, :3]
         n, rows = residual.shape
-        jac = np.empty((n, rows, 18))
+        jac = np.empty((n, rows, 24))
         if self.config.residual == "point_to_plane":
             n_G = placed.normals_G[tgt]
             n_ref = np.einsum("nji,nj->ni", R_stop, n_G)  # the normal in the reference frame
@@ -491,6 +513,11 @@ class _Problem:
             jac[:, 0, 12:15] = -n_G
             # The target's normal turns with its stop too: d(n.(g - m))/d(phi_k).
             jac[:, 0, 15:18] = -_cross(m, n_G) + _cross(n_G, g - m)
+            # ...and with its LiDAR's extrinsics (in the reference frame of its stop).
+            u = np.einsum("nji,nj->ni", R_target, n_G)
+            w = np.einsum("nji,nj->ni", R_target, g - m)
+            jac[:, 0, 18:21] = -u
+            jac[:, 0, 21:24] = _cross(u, q_target + w)
         else:
             eye = np.broadcast_to(np.eye(3), (n, 3, 3))
             jac[:, :, 0:3] = eye
@@ -499,31 +526,36 @@ class _Problem:
             jac[:, :, 9:12] = -R_stop @ _hat_batch(q)
             jac[:, :, 12:15] = -eye
             jac[:, :, 15:18] = _hat_batch(m)
-        weighted = jac * weight[:, None, None]
+            jac[:, :, 18:21] = -R_target
+            jac[:, :, 21:24] = R_target @ _hat_batch(q_target)
         starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if n else np.zeros(0, np.int64)
         ends = np.r_[starts[1:], n] if n else starts
         for a, b_end in zip(starts, ends, strict=True):
             group = int(key[a])
-            lidar, j, *_ = self.sources.slices[group // layout.n_stops]
-            k = group % layout.n_stops
-            block, wblock = jac[a:b_end], weighted[a:b_end]
-            columns = [layout.stop(j), layout.lidar(lidar), layout.stop(k)]
-            if k == j:
-                # The source and the target move with the same stop pose: one block.
-                block = np.concatenate([block[..., 0:6] + block[..., 12:18], block[..., 6:12]], 2)
-                wblock = np.concatenate(
-                    [wblock[..., 0:6] + wblock[..., 12:18], wblock[..., 6:12]], 2
-                )
-                columns = columns[:2]
-            index = np.concatenate(
-                [np.arange(c, c + 6) if c >= 0 else np.full(6, -1) for c in columns]
-            )
-            used = index >= 0
-            if not used.any():
+            t = group % layout.n_lidars
+            k = (group // layout.n_lidars) % layout.n_stops
+            lidar, j, *_ = self.sources.slices[group // layout.n_lidars // layout.n_stops]
+            # Slots (S_j, C_i, S_k, C_t); a pose in two slots (the same stop, or a LiDAR's own
+            # map) gets the sum of their blocks, a fixed pose none.
+            slots: dict[int, list[int]] = {}
+            for slot, column in enumerate(
+                (layout.stop(j), layout.lidar(lidar), layout.stop(k), layout.lidar(t))
+            ):
+                if column >= 0:
+                    slots.setdefault(column, []).append(slot)
+            if not slots:
                 continue
-            flat = block.reshape(-1, block.shape[2])[:, used]
-            wflat = wblock.reshape(-1, block.shape[2])[:, used]
-            cols = index[used]
+            block = np.concatenate(
+                [
+                    sum(jac[a:b_end, :, 6 * x : 6 * x + 6] for x in group_slots)
+                    for group_slots in slots.values()
+                ],
+                axis=2,
+            )
+            wblock = block * weight[a:b_end, None, None]
+            cols = np.concatenate([np.arange(c, c + 6) for c in slots])
+            flat = block.reshape(-1, block.shape[2])
+            wflat = wblock.reshape(-1, block.shape[2])
             H[np.ix_(cols, cols)] += wflat.T @ flat
             b[cols] += wflat.T @ residual[a:b_end].reshape(-1)
         chi2 = float(np.sum(weight[:, None] * residual**2))

@@ -1,7 +1,8 @@
 """Accuracy, convergence, stage times and peak memory of the calibration (issue 3's protocol).
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -m tests.bench.bench_calibration [--quick]
-        [--seeds 10] [--rate 0.25] [--cases set1-box ...] [--methods proposed ...]
+        [--seeds 10] [--first-seed 0] [--rate 0.25] [--cases set1-box ...]
+        [--methods proposed ...]
         [--no-timing] [--plot convergence.png] [--recordings DIR]
 
 Accuracy: for every case and seed, `simulate_problem(case, seed, rate)` (initial extrinsics
@@ -348,6 +349,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="2 seeds, rate 0.1, two cases")
     parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--rate", type=float, default=0.25, help="LiDAR rate scale of trials")
     parser.add_argument("--cases", nargs="*", default=list(CASES))
     parser.add_argument("--methods", nargs="*", default=list(METHODS))
@@ -362,7 +364,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         args.timing_cases = args.timing_cases[:1]
     results: dict[str, list[dict[str, Trial]]] = defaultdict(list)
     for case in args.cases:
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             started = time.perf_counter()
             trial = run_trial(case, seed, args.rate, args.methods)
             results[case].append(trial)

@@ -27,9 +27,12 @@ def _stage_inputs() -> tuple[Any, ...]:
 
 
 @pytest.mark.parametrize("residual", ["point_to_plane", "point_to_point"])
-def test_normal_equations_hold_the_cost_gradient(residual: ResidualKind) -> None:
+@pytest.mark.parametrize("every_lidar", [False, True])
+def test_normal_equations_hold_the_cost_gradient(residual: ResidualKind, every_lidar: bool) -> None:
     _, planes, rough, objects, normals = _stage_inputs()
-    config = OptimisationConfig(residual=residual, max_points_per_cloud=60)
+    config = OptimisationConfig(
+        residual=residual, max_points_per_cloud=60, lidar_self_consistency=every_lidar
+    )
     problem = _Problem(objects, planes, rough.floor_G, len(rough.T_G_ref), config, normals)
     stops, lidars, scale = rough.T_G_ref, rough.T_ref_lidar, 0.05
     pairs = problem.associate(problem.place(stops, lidars))
