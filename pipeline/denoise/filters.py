@@ -52,7 +52,10 @@ def nearest_neighbours(cloud: Points, k: int) -> Neighbours:
 
     # k + 1 because the query point finds itself; the first column is a zero either way (itself or
     # a duplicate of it), so dropping it leaves the distances to k other points.
-    distances, index = KDTree(cloud).query(cloud, k=k + 1)
+    # float32, centred: half the kd-tree's time (0.89 -> 0.40 s CPU per 100k points, k = 21, on
+    # this machine) at micrometre resolution within a LiDAR's range, far below its range noise.
+    centred = np.ascontiguousarray(cloud - cloud.mean(axis=0), dtype=np.float32)
+    distances, index = KDTree(centred).query(centred, k=k + 1)
     mean = np.asarray(distances[:, 1:].mean(axis=1), dtype=np.float64)
     return Neighbours(mean, np.asarray(index[:, 1:], dtype=np.intp))
 

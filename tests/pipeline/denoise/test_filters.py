@@ -50,7 +50,8 @@ def test_knn_mean_distance_is_the_mean_over_the_k_nearest_other_points() -> None
 
     distances = np.sort(cdist(cloud, cloud), axis=1)[:, 1:6]  # column 0: the point itself
 
-    np.testing.assert_allclose(knn_mean_distances(cloud, 5), distances.mean(axis=1), rtol=1e-12)
+    # The kd-tree works in float32 (half the time): distances agree to float32's precision.
+    np.testing.assert_allclose(knn_mean_distances(cloud, 5), distances.mean(axis=1), rtol=1e-6)
 
 
 # --- clean and sparse surfaces -------------------------------------------------------------
