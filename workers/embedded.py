@@ -21,6 +21,7 @@ from service.app import create_app
 from service.auth import create_key
 from service.db import Database
 from service.models import ApiKey, Scope
+from service.server import http_protocol
 from service.settings import Settings
 from workers.worker import Worker, WorkerOptions
 
@@ -81,6 +82,7 @@ class EmbeddedService:
             log_level="warning",
             access_log=self.access_log,
             lifespan="on",
+            http=http_protocol(),
         )
         self._server = uvicorn.Server(config)
         server_thread = threading.Thread(
