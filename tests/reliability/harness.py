@@ -165,12 +165,11 @@ def processes() -> Iterator[list[Process]]:
             process.kill()
 
 
-def start_worker(settings: Settings, job: str, log: Path, **env: str) -> Process:
-    return start(
-        ["fleetcal", "worker", "--concurrency", "1", "--job", job, "--log-level", "info"],
-        environment(settings, **env),
-        log,
-    )
+def start_worker(
+    settings: Settings, job: str, log: Path, *, concurrency: int = 1, **env: str
+) -> Process:
+    command = ["fleetcal", "worker", "--concurrency", str(concurrency), "--job", job]
+    return start([*command, "--log-level", "info"], environment(settings, **env), log)
 
 
 def api_argv(port: int) -> list[str]:

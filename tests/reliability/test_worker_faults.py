@@ -72,37 +72,65 @@ def held(db: Database, run_id: uuid.UUID, attempt: int, stage: str | None = None
 def test_a_worker_killed_in_each_stage_leaves_the_run_to_finish_once(
     settings: Settings, db: Database, tiny_recording: bytes, tmp_path: Path
 ) -> None:
+    """Two runs share the stages: a worker calibrating both (two pipeline processes) is killed
+    with run A in one stage and run B in another, its successor takes both up after their leases
+    and is killed in the next two stages, and so on; the last one lets them finish."""
     settings = short_lease(settings)
-    pause_at = {str(attempt): stage for attempt, stage in enumerate(WORKER_STAGES, start=1)}
-    last = len(WORKER_STAGES) + 1
-    run_id = store_run(
-        settings, db, tiny_recording, config={**QUICK, "pause_at": pause_at}, max_attempts=last
-    )
+    half = (len(WORKER_STAGES) + 1) // 2
+    stages = {"A": WORKER_STAGES[:half], "B": WORKER_STAGES[half:]}
+    runs = {
+        name: store_run(
+            settings,
+            db,
+            tiny_recording,
+            config={**QUICK, "pause_at": {str(k): s for k, s in enumerate(names, start=1)}},
+            max_attempts=half + 1,
+        )
+        for name, names in stages.items()
+    }
+
+    def both_held(attempt: int, in_stage: bool) -> bool:
+        """Each run held at `attempt` (in its stage), or, past its stages, finished."""
+        return all(
+            held(db, runs[name], attempt, names[attempt - 1] if in_stage else None)
+            if attempt <= len(names)
+            else not in_stage or run_row(db, runs[name]).status == RunStatus.SUCCEEDED
+            for name, names in stages.items()
+        )
+
     with processes() as workers:
-        workers.append(start_worker(settings, PAUSED_CALIBRATION, tmp_path / "worker-1.log"))
-        for attempt, stage in enumerate(WORKER_STAGES, start=1):
+        log = tmp_path / "worker-1.log"
+        workers.append(start_worker(settings, PAUSED_CALIBRATION, log, concurrency=2))
+        for attempt in range(1, half + 1):
             doomed = workers[-1]
-            wait_for(f"attempt {attempt}", partial(held, db, run_id, attempt), WAIT_S)
-            # The next worker starts while this one calibrates: it waits for the lease to lapse.
+            wait_for(f"attempt {attempt}", partial(both_held, attempt, False), WAIT_S)
+            # The next worker starts while this one calibrates: it waits for the leases to lapse.
             log = tmp_path / f"worker-{attempt + 1}.log"
-            workers.append(start_worker(settings, PAUSED_CALIBRATION, log))
-            in_stage = partial(held, db, run_id, attempt, stage)
-            wait_for(f"attempt {attempt} in stage {stage}", in_stage, WAIT_S)
+            workers.append(start_worker(settings, PAUSED_CALIBRATION, log, concurrency=2))
+            in_stages = [names[attempt - 1] for names in stages.values() if attempt <= len(names)]
+            wait_for(f"attempt {attempt} in {in_stages}", partial(both_held, attempt, True), WAIT_S)
             doomed.kill()
-            assert held(db, run_id, attempt, stage), "the kill neither ended nor released the run"
-            assert stored_results(db, run_id) == (0, 0)
-        final = (RunStatus.SUCCEEDED, RunStatus.FAILED)
-        wait_for("the last attempt", lambda: run_row(db, run_id).status in final, WAIT_S)
+            assert both_held(attempt, True), "the kill neither ended nor released a run"
+            for name, names in stages.items():
+                if attempt <= len(names):
+                    assert stored_results(db, runs[name]) == (0, 0)
+
+        def ended() -> bool:
+            final = (RunStatus.SUCCEEDED, RunStatus.FAILED)
+            return all(run_row(db, run).status in final for run in runs.values())
+
+        wait_for("the last attempts", ended, WAIT_S)
         survivor = workers[-1]
         survivor.stop()
-    run = run_row(db, run_id)
-    assert run.status == RunStatus.SUCCEEDED, (run.error, survivor.output())
-    assert run.attempts == last, "one attempt per killed worker, and the one that finished"
-    assert stored_once(db, run_id)
+    for name, names in stages.items():
+        run = run_row(db, runs[name])
+        assert run.status == RunStatus.SUCCEEDED, (name, run.error, survivor.output())
+        assert run.attempts == len(names) + 1, "one attempt per kill, and the one that finished"
+        assert stored_once(db, runs[name])
     with db.session() as session:
-        result = repository.get_run(session, run_id)
-        assert result is not None and result[1] is not None
-        document = result[1].document
+        found = repository.get_run(session, runs["B"])
+        assert found is not None and found[1] is not None
+        document = found[1].document
     assert document["drift"]["against"] == "design" and document["report"]["images"]
 
 
