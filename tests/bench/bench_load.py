@@ -41,9 +41,8 @@ from service.db import Database
 from service.models import LidarExtrinsic, Result, Run, RunStatus, Scope
 from service.settings import Settings
 from tests.bench.bench_queue import scratch_database
-from tests.reliability.harness import QUICK, Process, environment, free_port, processes, start
+from tests.reliability.harness import QUICK, environment, free_port, processes, start, wait_ready
 from tests.workers.jobs import SCRIPTED
-from tests.workers.runs import wait_for
 from workers.worker import CALIBRATE_JOB
 
 POLL_S = 0.5
@@ -209,17 +208,6 @@ def drive(url: str, robots: list[Robot], body: bytes, config: str) -> float:
     return time.perf_counter() - began
 
 
-def ready(url: str, process: Process) -> None:
-    def answers() -> bool:
-        assert process.popen.poll() is None, process.output()
-        try:
-            return httpx.get(f"{url}/readyz", timeout=5).status_code == 200
-        except httpx.TransportError:
-            return False
-
-    wait_for("the API", answers, timeout=180)
-
-
 def run_load(
     database: str, settings: Settings, args: argparse.Namespace, body: bytes, logs: Path
 ) -> Outcome:
@@ -242,7 +230,7 @@ def run_load(
         else:
             # The embedded service runs the real job; --job scripted is for PostgreSQL only.
             started.append(start([*serve, "--workers", str(args.workers)], env, logs / "api.log"))
-        ready(url, started[0])
+        wait_ready(url, started[0], timeout=180)
         wall = drive(url, robots, body, config)
         for process in started:
             process.stop()

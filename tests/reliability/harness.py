@@ -184,6 +184,12 @@ def start_api(
     port = free_port()
     process = start([*(wrap or []), *api_argv(port)], environment(settings, **env), log)
     url = f"http://127.0.0.1:{port}"
+    wait_ready(url, process)
+    return process, url
+
+
+def wait_ready(url: str, process: Process, timeout: float = 120) -> None:
+    """Until the API at `url` answers /readyz (failing at once if its process died)."""
 
     def ready() -> bool:
         assert process.popen.poll() is None, process.output()
@@ -192,8 +198,7 @@ def start_api(
         except httpx.TransportError:
             return False
 
-    wait_for("the API", ready, timeout=120)
-    return process, url
+    wait_for("the API", ready, timeout=timeout)
 
 
 def free_port() -> int:
