@@ -68,7 +68,7 @@ def messages(draw: st.DrawFn) -> SimpleNamespace:
     )
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(msg=messages(), drop_zero=st.booleans(), keep_type=st.booleans())
 def test_any_message_decodes_to_finite_points_or_a_pipeline_error(
     msg: Any, drop_zero: bool, keep_type: bool
