@@ -40,13 +40,14 @@ class Neighbours:
     """The one kNN query all filters share: `mean_distance` (N,) = `mu_n`, `index` (N, k)."""
 
     mean_distance: NDArray[np.float64]
-    index: NDArray[np.intp]
+    index: NDArray[np.unsignedinteger]
 
 
 def nearest_neighbours(cloud: Points, k: int) -> Neighbours:
     """The `k` nearest other points of every point (needs more than `k` points).
 
-    Duplicates count as neighbours at distance 0.
+    Duplicates count as neighbours at distance 0. The query runs on every core pykdtree's OpenMP
+    is allowed (`OMP_NUM_THREADS`).
     """
     from pykdtree.kdtree import KDTree
 
@@ -54,10 +55,12 @@ def nearest_neighbours(cloud: Points, k: int) -> Neighbours:
     # a duplicate of it), so dropping it leaves the distances to k other points.
     # float32, centred: half the kd-tree's time (0.89 -> 0.40 s CPU per 100k points, k = 21, on
     # this machine) at micrometre resolution within a LiDAR's range, far below its range noise.
+    # Leaves of 32 points: 7 % faster than the default 16 on 140k-point stop clouds.
     centred = np.ascontiguousarray(cloud - cloud.mean(axis=0), dtype=np.float32)
-    distances, index = KDTree(centred).query(centred, k=k + 1)
+    distances, index = KDTree(centred, leafsize=32).query(centred, k=k + 1)
     mean = np.asarray(distances[:, 1:].mean(axis=1), dtype=np.float64)
-    return Neighbours(mean, np.asarray(index[:, 1:], dtype=np.intp))
+    # The indices stay uint32 (a view): the filters index only a few per cent of the rows.
+    return Neighbours(mean, index[:, 1:])
 
 
 def knn_mean_distances(cloud: Points, k: int) -> NDArray[np.float64]:
@@ -173,11 +176,13 @@ def _cell_median(
     per_axis = math.ceil(1.0 / cell_rad) + 1
     cells = np.floor(directions / cell_rad).astype(np.int64) + per_axis
     base = 2 * per_axis + 1
-    keys = (cells[:, 0] * base + cells[:, 1]) * base + cells[:, 2]
-    _, cell_of, counts = np.unique(keys, return_inverse=True, return_counts=True)
-    order = np.lexsort((values, cell_of))
+    cell_of = (cells[:, 0] * base + cells[:, 1]) * base + cells[:, 2]  # < base**3, a few thousand
+    counts = np.bincount(cell_of, minlength=base**3)
+    # One sort by (cell, value): values scaled into [0, 0.5) ride below the integer cell key.
+    top = float(values.max()) if len(values) else 0.0
+    order = np.argsort(cell_of + (0.5 * values / top if top > 0 else 0.0), kind="stable")
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    medians = values[order[starts + counts // 2]]
+    medians = values[order[np.minimum(starts + counts // 2, len(values) - 1)]]
     return np.where(counts[cell_of] >= min_count, medians[cell_of], np.median(values))
 
 
