@@ -16,14 +16,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.config import FramesConfig, PipelineConfig, config_hash
-from pipeline.denoise import denoise
+from pipeline.denoise import DenoiseResult, denoise
 from pipeline.errors import BadInputError
 from pipeline.metric import metric_error
 from pipeline.observability import PoseUncertainty, level_rotation, pose_uncertainties
 from pipeline.optimisation import OptimisationResult, optimise
 from pipeline.problem import CalibrationProblem, LidarInfo
 from pipeline.rough_refinement import RoughRefinementResult, refine_with_floor
-from pipeline.segmentation import Plane, Segmentation, segment
+from pipeline.segmentation import FloorFit, Plane, Segmentation, above_floor, fit_floor, segment
 from pipeline.transforms import Matrix4, Points, invert, make_transform, pose_difference
 from pipeline.verdict import LidarEvidence, Verdict, judge
 
@@ -123,17 +123,21 @@ class CalibrationResult:
 @dataclass(frozen=True)
 class Prepared:
     """The problem in the calibration's own terms: LiDARs reference first, clouds per LiDAR and
-    stop (after stage 1), initial `T_G_ref` (J, 4, 4) and `T_ref_lidar` (L, 4, 4), and the
-    expected floor normal ("up") in each LiDAR's frame from the initial extrinsics."""
+    stop (after stage 1) with their floors (fitted before stage 1; inlier masks over the kept
+    points), initial `T_G_ref` (J, 4, 4) and `T_ref_lidar` (L, 4, 4), and the expected floor
+    normal ("up") in each LiDAR's frame from the initial extrinsics."""
 
     lidars: tuple[LidarInfo, ...]
     clouds: tuple[tuple[Points, ...], ...]
     T_G_ref: NDArray[np.float64]
     T_ref_lidar: NDArray[np.float64]
     up: tuple[NDArray[np.float64], ...]
+    floors: tuple[tuple[FloorFit | None, ...], ...]
     input_points: int
     removed_points: int
+    judged_points: int
     denoise_seconds: float
+    floor_seconds: float
 
 
 def order_lidars(problem: CalibrationProblem, frames: FramesConfig) -> tuple[LidarInfo, ...]:
@@ -161,9 +165,13 @@ def order_lidars(problem: CalibrationProblem, frames: FramesConfig) -> tuple[Lid
 def prepare(
     problem: CalibrationProblem, config: PipelineConfig, *, denoised: bool = True
 ) -> Prepared:
-    """Order the LiDARs, run stage 1 (when `denoised` and enabled) and set up the initial poses.
+    """Order the LiDARs, fit each cloud's floor, run stage 1 (when `denoised` and enabled) and set
+    up the initial poses.
 
-    Clouds stay at full rate: segmentation voxelises only what stands above the floor."""
+    Stage 1 judges only the points standing above the floor (the object candidates, a tenth of a
+    full-rate cloud): bleeding points elsewhere never reach the later stages, and judging all
+    would cost ten times as much. Their neighbours are searched among every point. Clouds stay at
+    full rate: segmentation voxelises only what stands above the floor."""
     lidars = order_lidars(problem, config.frames)
     T_base_ref = lidars[0].T_base_lidar
     T_odom_ref0 = problem.stops[0].T_odom_base @ T_base_ref
@@ -173,36 +181,59 @@ def prepare(
     T_ref_lidar = np.stack([T_ref_base @ lidar.T_base_lidar for lidar in lidars])
     T_ref_lidar[0] = np.eye(4)
     up = tuple(lidar.T_base_lidar[:3, :3].T @ np.array([0.0, 0.0, 1.0]) for lidar in lidars)
-    clouds = []
-    counts = {"input": 0, "removed": 0}
-    started = time.perf_counter()
-    for lidar in lidars:
-        row = []
+    clouds, floors = [], []
+    counts = {"input": 0, "removed": 0, "judged": 0}
+    seconds = {"floor": 0.0, "denoise": 0.0}
+    run_stage_1 = denoised and config.denoise.enabled
+    for lidar, lidar_up in zip(lidars, up, strict=True):
+        row, row_floors = [], []
         for stop in problem.stops:
             cloud = np.asarray(stop.clouds.get(lidar.frame, np.zeros((0, 3))), dtype=np.float64)
             counts["input"] += len(cloud)
-            if denoised and config.denoise.enabled and len(cloud):
-                kept = denoise(cloud, config.denoise)
+            started = time.perf_counter()
+            floor = fit_floor(cloud, lidar_up, config.segmentation)
+            seconds["floor"] += time.perf_counter() - started
+            if run_stage_1 and floor is not None:
+                kept = denoise_above_floor(cloud, floor[0], config)
+                seconds["denoise"] += kept.seconds
+                counts["judged"] += kept.judged_points
                 counts["removed"] += kept.removed_points
                 cloud = cloud[kept.keep]
+                floor = (floor[0], floor[1][kept.keep], floor[2])
             row.append(cloud)
+            row_floors.append(floor)
         clouds.append(tuple(row))
+        floors.append(tuple(row_floors))
     return Prepared(
         lidars,
         tuple(clouds),
         T_G_ref,
         T_ref_lidar,
         up,
+        tuple(floors),
         counts["input"],
         counts["removed"],
-        time.perf_counter() - started,
+        counts["judged"],
+        seconds["denoise"],
+        seconds["floor"],
     )
+
+
+def denoise_above_floor(cloud: Points, floor: Plane, config: PipelineConfig) -> DenoiseResult:
+    """Stage 1 as the pipeline runs it on one stop cloud (N, 3) in its LiDAR's frame: only the
+    points standing above `floor` (object candidates) are judged, against all their neighbours."""
+    judge = above_floor(cloud, floor, config.segmentation)
+    plane = np.array([*floor.normal, floor.offset], dtype=np.float64)  # a x + b y + c z + d = 0
+    return denoise(cloud, config.denoise, floor_plane=plane, judge=judge)
 
 
 def segment_all(prepared: Prepared, config: PipelineConfig) -> tuple[tuple[Segmentation, ...], ...]:
     return tuple(
-        tuple(segment(cloud, up, config.segmentation) for cloud in row)
-        for row, up in zip(prepared.clouds, prepared.up, strict=True)
+        tuple(
+            segment(cloud, up, config.segmentation, floor)
+            for cloud, floor in zip(row, row_floors, strict=True)
+        )
+        for row, row_floors, up in zip(prepared.clouds, prepared.floors, prepared.up, strict=True)
     )
 
 
@@ -218,11 +249,14 @@ def floor_pose(T_base_ref: Matrix4, floor_ref: Plane, height_m: float) -> Matrix
 
 @contextmanager
 def _timed(
-    stages: dict[str, StageReport], name: str, details: dict[str, float | int | bool | str]
+    stages: dict[str, StageReport],
+    name: str,
+    details: dict[str, float | int | bool | str],
+    extra_seconds: float = 0.0,
 ) -> Iterator[None]:
     started = time.perf_counter()
     yield
-    stages[name] = StageReport(time.perf_counter() - started, details)
+    stages[name] = StageReport(time.perf_counter() - started + extra_seconds, details)
 
 
 def calibrate(
@@ -250,15 +284,22 @@ def calibrate(
         prepared.denoise_seconds,
         {
             "input_points": prepared.input_points,
+            "judged_points": prepared.judged_points,
             "removed_points": prepared.removed_points,
             "enabled": config.denoise.enabled,
             "method": str(config.denoise.method),
         },
     )
-    report("denoise", f"removed {prepared.removed_points} points")
+    report(
+        "denoise",
+        f"removed {prepared.removed_points} of the {prepared.judged_points} points above the floor"
+        if config.denoise.enabled
+        else "disabled",
+    )
 
-    details: dict[str, float | int | bool | str] = {}
-    with _timed(stages, "segmentation", details):
+    # The floors were fitted before stage 1 (it judges what stands on them): their time counts here.
+    details: dict[str, float | int | bool | str] = {"floor_seconds": prepared.floor_seconds}
+    with _timed(stages, "segmentation", details, extra_seconds=prepared.floor_seconds):
         segments = segment_all(prepared, config)
         objects = [[s.object_points for s in row] for row in segments]
         normals = [[s.object_normals for s in row] for row in segments]

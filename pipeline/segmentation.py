@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -228,21 +229,22 @@ def euclidean_clusters(points: Points, radius: float) -> NDArray[np.int64]:
     return result
 
 
-def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig) -> Segmentation:
-    """Split (N, 3) points of one LiDAR at one stop into floor and objects, in the LiDAR frame.
+FloorFit = tuple[Plane, NDArray[np.bool_], float]
+"""A cloud's floor: the plane, the inlier mask over the cloud and the inliers' RMS distance (m)."""
+
+
+def fit_floor(
+    points: Points, up: NDArray[np.float64], config: SegmentationConfig
+) -> FloorFit | None:
+    """The floor of (N, 3) points of one LiDAR at one stop (see `find_floor`), None if none.
 
     `up` (3,) is the expected floor normal in the LiDAR frame (base z through the initial
-    extrinsics); it picks the floor among planes and orients its normal.
+    extrinsics); it picks the floor among planes and orients its normal. The floor is found among
+    the raw points (a sample scores the hypotheses, a sample refits the plane).
     """
-    started = time.perf_counter()
-    cloud = np.asarray(points, dtype=np.float64)
-    up = np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
-    # The floor is found among the raw points (a sample scores the hypotheses, a sample refits
-    # the plane); only the points above it are voxelised: the floor is ~90 % of a full-rate
-    # cloud and voxelising it would cost more than everything else in this stage.
-    found = find_floor(
-        cloud,
-        up,
+    return find_floor(
+        np.asarray(points, dtype=np.float64),
+        np.asarray(up, dtype=np.float64) / np.linalg.norm(up),
         distance_m=config.floor_distance_m,
         iterations=config.ransac_iterations,
         scored_points=config.ransac_scored_points,
@@ -251,6 +253,31 @@ def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig)
         rng=np.random.default_rng(config.seed),
         fit_points=config.floor_fit_points,
     )
+
+
+def above_floor(points: Points, floor: Plane, config: SegmentationConfig) -> NDArray[np.bool_]:
+    """(N,) the points high enough above `floor` to be object candidates."""
+    mask: NDArray[np.bool_] = points @ floor.normal + floor.offset > config.object_min_height_m
+    return mask
+
+
+def segment(
+    points: Points,
+    up: NDArray[np.float64],
+    config: SegmentationConfig,
+    fitted: FloorFit | Literal["fit"] | None = "fit",
+) -> Segmentation:
+    """Split (N, 3) points of one LiDAR at one stop into floor and objects, in the LiDAR frame.
+
+    `up` (3,) is the expected floor normal in the LiDAR frame (see `fit_floor`). `fitted`: the
+    cloud's floor when the caller has fitted it already (`fit_floor` on these points), None when
+    it found none; fitted here by default.
+    """
+    started = time.perf_counter()
+    cloud = np.asarray(points, dtype=np.float64)
+    # Only the points above the floor are voxelised: the floor is ~90 % of a full-rate cloud and
+    # voxelising it would cost more than everything else in this stage.
+    found = fit_floor(cloud, up, config) if isinstance(fitted, str) else fitted
     if found is None:
         # Objects are what stands on the floor: without a floor nothing can be told apart from it.
         floor, floor_inliers, rms = None, 0, float("nan")
@@ -258,10 +285,7 @@ def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig)
     else:
         floor, floor_mask, rms = found
         floor_inliers = int(np.count_nonzero(floor_mask))
-        height = cloud @ floor.normal + floor.offset
-        candidates = voxel_downsample(
-            cloud[height > config.object_min_height_m], config.voxel_size_m
-        )
+        candidates = voxel_downsample(cloud[above_floor(cloud, floor, config)], config.voxel_size_m)
     labels = euclidean_clusters(candidates, config.cluster_radius_m)
     sizes = np.bincount(labels) if len(labels) else np.zeros(0, dtype=np.int64)
     kept = sizes >= config.min_cluster_points

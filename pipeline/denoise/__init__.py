@@ -12,12 +12,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from pipeline.denoise.centre import fit_floor_plane, observation_centre
 from pipeline.denoise.filters import (
     KeepMask,
+    Neighbours,
     Points,
     as_cloud,
     dsor_keep,
@@ -32,6 +33,7 @@ from pipeline.denoise.filters import (
     sor_keep,
     sor_mask,
 )
+from pipeline.errors import BadInputError
 
 __all__ = [
     "DenoiseConfig",
@@ -93,7 +95,16 @@ class DenoiseConfig(BaseModel):
         default=0.05, gt=0.0, description="RANSAC inlier distance of the floor fit (metres)"
     )
     floor_iterations: int = Field(default=200, ge=1, description="RANSAC hypotheses for the floor")
-    seed: int = Field(default=0, description="seed of the floor RANSAC (results are reproducible)")
+    population_points: int = Field(
+        default=5000,
+        ge=1,
+        description="when only some points are judged (the pipeline judges those standing above "
+        "the floor), the cloud-wide statistics (mu and sigma of mu_n; pattern's spacing per "
+        "direction) come from this many random points of the whole cloud",
+    )
+    seed: int = Field(
+        default=0, description="seed of the floor RANSAC and of the sample (results reproducible)"
+    )
 
 
 @dataclass(frozen=True)
@@ -103,6 +114,7 @@ class DenoiseResult:
     `keep`: (N,) bool, True = keep. `observation_centre`: (3,) in the LiDAR frame for the methods
     that use one, else None. `note`: why the cloud was left untouched when it was (disabled, too
     few points to judge); None when the filter ran. `seconds`: wall time of the call.
+    `judged_points`: how many points were judged (all, unless the call named some).
     """
 
     keep: KeepMask
@@ -110,6 +122,7 @@ class DenoiseResult:
     seconds: float
     observation_centre: Points | None = None
     note: str | None = None
+    judged_points: int = 0
 
     @property
     def removed_points(self) -> int:
@@ -121,6 +134,7 @@ def denoise(
     config: DenoiseConfig | None = None,
     optical_axis: Sequence[float] | ArrayLike = (1.0, 0.0, 0.0),
     floor_plane: ArrayLike | None = None,
+    judge: ArrayLike | None = None,
 ) -> DenoiseResult:
     """Stage 1 on one LiDAR's accumulated cloud of one stop. The pipeline calls
 
@@ -130,7 +144,11 @@ def denoise(
     `points`: (N, 3) in the LiDAR frame (sensor at the origin). `optical_axis`: (3,) direction of
     the scan pattern's centre in that frame (Livox Mid-70: +x); only `proposed` and `floored`
     use it. `floor_plane`: optional (4,) `[a, b, c, d]`, `a x + b y + c z + d = 0` in the LiDAR
-    frame, for the observation centre; fitted here when omitted.
+    frame, for the observation centre; fitted here when omitted. `judge`: optional (N,) bool, the
+    points to judge (the others are kept): their neighbours are still searched among all points,
+    and the cloud-wide statistics come from `population_points` random points of the whole
+    cloud. The pipeline judges only what stands above the floor, where the objects are: a tenth
+    of a full-rate cloud, a tenth of the time.
 
     Defined results rather than errors: a cloud of at most `k` points is kept whole (there are
     not `k` neighbours to judge density by) and `note` says so; duplicated points and a cloud
@@ -146,22 +164,30 @@ def denoise(
         return _untouched(
             cloud, cfg, start, f"{len(cloud)} points are too few to judge with k={cfg.k}; kept all"
         )
-    neighbours = nearest_neighbours(cloud, cfg.k)
+    rows, population = _judged_rows(cloud, cfg, judge)
+    both = rows if population is None else np.union1d(rows, population)
+    found = nearest_neighbours(cloud, cfg.k, None if judge is None else both)
+    at_rows = np.searchsorted(both, rows)
+    neighbours = Neighbours(found.mean_distance[at_rows], found.index[at_rows])
     mu = neighbours.mean_distance
+    sample = None if population is None else found.mean_distance[np.searchsorted(both, population)]
+    points = cloud[rows]
     centre: Points | None = None
     if cfg.method is DenoiseMethod.PATTERN:
-        keep = pattern_keep(
+        judged = pattern_keep(
             neighbours,
             cloud,
             density_ratio=cfg.density_ratio,
             beam_cos=cfg.beam_cos,
             beam_extent=cfg.beam_extent,
             cell_deg=cfg.cell_deg,
+            rows=rows,
+            population=None if population is None or sample is None else (sample, population),
         )
     elif cfg.method is DenoiseMethod.SOR:
-        keep = sor_keep(mu, cfg.cs)
+        judged = sor_keep(mu, cfg.cs, sample)
     elif cfg.method is DenoiseMethod.DSOR:
-        keep = dsor_keep(mu, cloud, cfg.cs, cfg.cr)
+        judged = dsor_keep(mu, points, cfg.cs, cfg.cr, sample)
     else:
         centre = observation_centre(
             cloud,
@@ -172,8 +198,29 @@ def denoise(
             seed=cfg.seed,
         )
         floored = cfg.method is DenoiseMethod.FLOORED
-        keep = proposed_keep(mu, cloud, centre, cfg.cs, cfg.cr, floored=floored)
-    return DenoiseResult(keep, cfg.method, time.perf_counter() - start, centre)
+        judged = proposed_keep(
+            mu, points, centre, cfg.cs, cfg.cr, floored=floored, population=sample
+        )
+    keep = np.ones(len(cloud), dtype=np.bool_)
+    keep[rows] = judged
+    return DenoiseResult(keep, cfg.method, time.perf_counter() - start, centre, None, len(rows))
+
+
+def _judged_rows(
+    cloud: Points, cfg: DenoiseConfig, judge: ArrayLike | None
+) -> tuple[NDArray[np.intp], NDArray[np.intp] | None]:
+    """Rows to judge, and the random rows the cloud-wide statistics come from (None: the judged
+    rows themselves, which are then every row)."""
+    if judge is None:
+        return np.arange(len(cloud)), None
+    mask = np.asarray(judge, dtype=np.bool_).reshape(-1)
+    if mask.shape != (len(cloud),):
+        raise BadInputError(
+            f"the judge mask must have one entry per point ({len(cloud)}); got {mask.shape[0]}"
+        )
+    size = min(cfg.population_points, len(cloud))
+    sample = np.random.default_rng(cfg.seed).choice(len(cloud), size=size, replace=False)
+    return np.flatnonzero(mask), np.sort(sample)
 
 
 def _untouched(cloud: Points, cfg: DenoiseConfig, start: float, note: str) -> DenoiseResult:

@@ -10,6 +10,7 @@ perturbed by up to 0.2 m / 5 deg, odometry by up to 0.2 m / 3 deg, as in the pap
 by each method; the error of each non-reference LiDAR relative to the reference (translation m,
 rotation deg) is compared with the synthesiser's truth. Methods: `proposed` (the pipeline as
 configured by default), `point_to_point` (the same with the paper's point-to-point residual),
+`without_stage1` (the same with the noise filter switched off),
 `without_rr` (no rough refinement, no floor terms), `entire_cloud` (the same optimiser on every
 point, no segmentation). `initial` is the error before calibration.
 
@@ -50,7 +51,7 @@ CASES = (
     "spinning",
     "driven",
 )
-METHODS = ("proposed", "point_to_point", "without_rr", "entire_cloud")
+METHODS = ("proposed", "point_to_point", "without_stage1", "without_rr", "entire_cloud")
 
 
 @dataclass
@@ -123,6 +124,10 @@ def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict
             elif method == "point_to_point":
                 data = resolved(config)
                 data["optimisation"]["residual"] = "point_to_point"
+                result = calibrate(problem, config_from_mapping(data))
+            elif method == "without_stage1":
+                data = resolved(config)
+                data["denoise"]["enabled"] = False
                 result = calibrate(problem, config_from_mapping(data))
             elif method == "without_rr":
                 result = without_rough_refinement(problem, config)

@@ -73,3 +73,13 @@ def test_unknown_reference_and_single_stop_are_bad_input() -> None:
         calibrate(problem, config)
     with pytest.raises(BadInputError, match="at least two stops"):
         calibrate(dataclasses.replace(problem, stops=problem.stops[:1]))
+
+
+def test_stage_1_judges_only_what_stands_above_the_floor() -> None:
+    result = box_calibration()
+    denoise = result.stages["denoise"].details
+    assert denoise["enabled"] is True and denoise["method"] == "pattern"
+    judged, removed = int(denoise["judged_points"]), int(denoise["removed_points"])
+    # The objects and what trails behind them: a small share of every cloud, of which a few
+    # per cent are bleeding points.
+    assert 0 < removed < judged < 0.3 * int(denoise["input_points"])

@@ -1,6 +1,12 @@
 import numpy as np
 
-from pipeline.segmentation import SegmentationConfig, euclidean_clusters, find_floor, segment
+from pipeline.segmentation import (
+    SegmentationConfig,
+    euclidean_clusters,
+    find_floor,
+    fit_floor,
+    segment,
+)
 from tests.pipeline.calibration_data import box_prepared, box_problem, floor_only_problem
 
 
@@ -68,3 +74,19 @@ def test_a_bare_floor_yields_almost_no_object_points() -> None:
         for stop in problem.stops
     )
     assert total < 50
+
+
+def test_a_floor_fitted_beforehand_gives_the_same_segmentation() -> None:
+    problem, _ = box_problem()
+    lidar = problem.lidars[0]
+    up = lidar.T_base_lidar[:3, :3].T @ [0.0, 0.0, 1.0]
+    cloud = problem.stops[0].clouds[lidar.frame]
+    config = SegmentationConfig()
+    fitted = fit_floor(cloud, up, config)
+    assert fitted is not None
+
+    given, own = segment(cloud, up, config, fitted), segment(cloud, up, config)
+
+    np.testing.assert_array_equal(given.object_points, own.object_points)
+    assert given.floor_inliers == own.floor_inliers
+    assert segment(cloud, up, config, None).object_points.shape == (0, 3)

@@ -58,11 +58,13 @@ def veil(n: int, seed: int = 0) -> NDArray[np.float64]:
 @dataclass(frozen=True)
 class LabelledCloud:
     """One stop cloud of one LiDAR from the synthesiser: `points` (N, 3) in its frame,
-    `is_bleeding` (N,), `optical_axis` (3,)."""
+    `is_bleeding` (N,), `optical_axis` (3,), `up` (3,): the floor normal expected in its frame
+    from the initial extrinsics (what the pipeline's floor fit starts from)."""
 
     points: NDArray[np.float64]
     is_bleeding: NDArray[np.bool_]
     optical_axis: NDArray[np.float64]
+    up: NDArray[np.float64]
 
 
 def synth_stop_clouds(
@@ -80,6 +82,7 @@ def synth_stop_clouds(
                     stop.clouds[lidar.frame],
                     truth.stop_labels(stop.index, lidar.frame).is_bleeding,
                     np.asarray(truth.lidar(lidar.frame).optical_axis, dtype=np.float64),
+                    lidar.T_base_lidar[:3, :3].T @ np.array([0.0, 0.0, 1.0]),
                 )
 
 
