@@ -10,7 +10,7 @@ perturbed by up to 0.2 m / 5 deg, odometry by up to 0.2 m / 3 deg, as in the pap
 by each method; the error of each non-reference LiDAR relative to the reference (translation m,
 rotation deg) is compared with the synthesiser's truth. Methods: `proposed` (the pipeline as
 configured by default), `point_to_point` (the same with the paper's point-to-point residual),
-`without_stage1` (the same with the noise filter switched off),
+`with_stage1` / `without_stage1` (the same with the noise filter switched on / off),
 `without_rr` (no rough refinement, no floor terms), `entire_cloud` (the same optimiser on every
 point, no segmentation). `initial` is the error before calibration.
 
@@ -51,7 +51,14 @@ CASES = (
     "spinning",
     "driven",
 )
-METHODS = ("proposed", "point_to_point", "without_stage1", "without_rr", "entire_cloud")
+METHODS = (
+    "proposed",
+    "point_to_point",
+    "with_stage1",
+    "without_stage1",
+    "without_rr",
+    "entire_cloud",
+)
 
 
 @dataclass
@@ -125,9 +132,9 @@ def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict
                 data = resolved(config)
                 data["optimisation"]["residual"] = "point_to_point"
                 result = calibrate(problem, config_from_mapping(data))
-            elif method == "without_stage1":
+            elif method in ("with_stage1", "without_stage1"):
                 data = resolved(config)
-                data["denoise"]["enabled"] = False
+                data["denoise"]["enabled"] = method == "with_stage1"
                 result = calibrate(problem, config_from_mapping(data))
             elif method == "without_rr":
                 result = without_rough_refinement(problem, config)

@@ -6,6 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.calibrate import STAGES, calibrate
 from pipeline.config import PipelineConfig
+from pipeline.denoise import DenoiseConfig
 from pipeline.errors import BadInputError
 from pipeline.transforms import invert, pose_difference
 from tests.pipeline.calibration_data import (
@@ -75,8 +76,14 @@ def test_unknown_reference_and_single_stop_are_bad_input() -> None:
         calibrate(dataclasses.replace(problem, stops=problem.stops[:1]))
 
 
+def test_stage_1_is_off_by_default_and_says_so() -> None:
+    denoise = box_calibration().stages["denoise"]
+    assert denoise.details["enabled"] is False and denoise.details["removed_points"] == 0
+
+
 def test_stage_1_judges_only_what_stands_above_the_floor() -> None:
-    result = box_calibration()
+    config = PipelineConfig(denoise=DenoiseConfig(density_ratio=1.8))
+    result = calibrate(box_problem()[0], config)
     denoise = result.stages["denoise"].details
     assert denoise["enabled"] is True and denoise["method"] == "pattern"
     judged, removed = int(denoise["judged_points"]), int(denoise["removed_points"])
