@@ -1,5 +1,6 @@
 """`create_app(settings)`: the FastAPI application. Nothing happens at import; the lifespan opens
-the database (applying migrations), the storage, and sweeps uploads a killed process left behind."""
+the database (applying migrations), the storage, and sweeps the uploads and recordings a killed
+process left behind."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from anyio import to_thread
 from fastapi import FastAPI
 
 from pipeline import __version__
+from service import repository
 from service.dashboard import router as dashboard_router
 from service.db import Database
 from service.deps import Services
@@ -19,7 +21,7 @@ from service.metrics import Metrics, MetricsMiddleware
 from service.problems import install_problem_handlers
 from service.routes import exports, fleet, health, reports, robots, runs, tolerance
 from service.settings import Settings
-from service.storage import make_storage
+from service.storage import Storage, make_storage
 
 log = logging.getLogger(__name__)
 
@@ -55,15 +57,39 @@ def create_app(settings: Settings) -> FastAPI:
     return app
 
 
+def sweep_orphan_recordings(db: Database, storage: Storage, older_than: timedelta) -> int:
+    """Delete stored recordings older than `older_than` that no run points at; return how many.
+
+    An upload is moved into place just before its run is committed; a process killed in between
+    leaves the file behind. The age keeps this clear of uploads still being recorded.
+    """
+    keys = list(storage.keys_older_than(repository.RECORDINGS, older_than))
+    if not keys:
+        return 0
+    with db.session() as session:
+        orphans = repository.unreferenced_recordings(session, keys)
+    for key in orphans:
+        storage.delete(key)
+    return len(orphans)
+
+
 def start_services(settings: Settings, metrics: Metrics | None = None) -> Services:
     """Open the database (migrated if `migrate_on_start`) and the storage."""
     db = Database.from_settings(settings)
     if settings.migrate_on_start:
         db.upgrade()
     storage = make_storage(settings)
-    swept = storage.sweep_stale_uploads(timedelta(seconds=settings.stale_upload_seconds))
+    stale = timedelta(seconds=settings.stale_upload_seconds)
+    swept = storage.sweep_stale_uploads(stale)
     if swept:
         log.warning("removed %d unfinished uploads left by a stopped process", swept)
+    orphans = sweep_orphan_recordings(db, storage, stale)
+    if orphans:
+        log.warning(
+            "removed %d stored recordings no run points at (a process stopped between "
+            "storing an upload and recording its run)",
+            orphans,
+        )
     metrics = metrics or Metrics()
     metrics.watch_queue(db)
     return Services(settings=settings, db=db, storage=storage, metrics=metrics)

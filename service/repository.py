@@ -6,6 +6,7 @@ robot, run and queue entry, or a result with its extrinsics and final status, la
 
 from __future__ import annotations
 
+import contextlib
 import json
 import uuid
 from dataclasses import dataclass
@@ -99,6 +100,31 @@ def list_robots(session: Session, *, limit: int, after_id: str | None) -> list[R
 
 def find_run_by_idempotency_key(session: Session, robot_id: str, key: str) -> Run | None:
     return session.scalar(select(Run).where(Run.robot_id == robot_id, Run.idempotency_key == key))
+
+
+RECORDINGS = "recordings"
+"""The storage folder of uploaded recordings: `recordings/{robot_id}/{run_id}`."""
+
+
+def recording_key(robot_id: str, run_id: uuid.UUID) -> str:
+    return f"{RECORDINGS}/{robot_id}/{run_id}"
+
+
+def unreferenced_recordings(session: Session, keys: list[str]) -> list[str]:
+    """The recording keys among `keys` that no run points at (found by run id, the key's last
+    part). A key not ending in a run id is not one this service wrote, and is never returned."""
+    by_run: dict[uuid.UUID, str] = {}
+    for key in keys:
+        with contextlib.suppress(ValueError):
+            by_run[uuid.UUID(key.rsplit("/", 1)[-1])] = key
+    run_ids = list(by_run)
+    orphans = []
+    for start in range(0, len(run_ids), 500):
+        batch = run_ids[start : start + 500]
+        rows = session.execute(select(Run.id, Run.storage_key).where(Run.id.in_(batch)))
+        stored = {run_id: key for run_id, key in rows}
+        orphans += [by_run[run_id] for run_id in batch if stored.get(run_id) != by_run[run_id]]
+    return orphans
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ import re
 import shutil
 import time
 import uuid
+from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO, Protocol, cast
@@ -65,6 +66,10 @@ class Storage(Protocol):
 
     def sweep_stale_uploads(self, older_than: timedelta) -> int:
         """Remove uploads a killed process left behind; return how many."""
+
+    def keys_older_than(self, prefix: str, older_than: timedelta) -> Iterator[str]:
+        """Keys of the stored objects in the folder `prefix` (no trailing slash) last written
+        more than `older_than` ago."""
 
 
 def validate_key(key: str) -> str:
@@ -152,6 +157,14 @@ class LocalStorage:
                     part.unlink()
                     removed += 1
         return removed
+
+    def keys_older_than(self, prefix: str, older_than: timedelta) -> Iterator[str]:
+        cutoff = time.time() - older_than.total_seconds()
+        base = self.root / validate_key(prefix)
+        for path in sorted(base.rglob("*")) if base.is_dir() else []:
+            with contextlib.suppress(FileNotFoundError):
+                if path.is_file() and path.stat().st_mtime < cutoff:
+                    yield path.relative_to(self.root).as_posix()
 
     def temporary_uploads(self) -> list[Path]:
         """Uploads in progress or left behind (tests and the reaper look here)."""
@@ -284,6 +297,20 @@ class S3Storage:
             self.client.delete_object(Bucket=self.bucket, Key=probe)
         except (BotoCoreError, ClientError) as err:
             raise StorageError(f"cannot write to {self.url}: {err}") from err
+
+    def keys_older_than(self, prefix: str, older_than: timedelta) -> Iterator[str]:
+        from botocore.exceptions import BotoCoreError, ClientError
+
+        cutoff = datetime.now(UTC) - older_than
+        paginator = self.client.get_paginator("list_objects_v2")
+        try:
+            folder = self.object_key(prefix) + "/"
+            for page in paginator.paginate(Bucket=self.bucket, Prefix=folder):
+                for item in page.get("Contents", []):
+                    if item["LastModified"] < cutoff:
+                        yield item["Key"][len(self.prefix) :]
+        except (BotoCoreError, ClientError) as err:
+            raise StorageError(f"cannot list {self.url}: {err}") from err
 
     def sweep_stale_uploads(self, older_than: timedelta) -> int:
         cutoff = datetime.now(UTC) - older_than

@@ -121,7 +121,7 @@ async def upload_run(
         stored = await stream_to_storage(
             request.stream(),
             services.storage,
-            f"recordings/{robot_id}/{run_id}",
+            repository.recording_key(robot_id, run_id),
             max_bytes=settings.max_upload_bytes,
             declared_length=declared_length,
             expected_sha256=content_sha256,

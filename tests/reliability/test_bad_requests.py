@@ -111,6 +111,9 @@ def test_a_body_shorter_than_its_content_length_then_a_hang_up_stores_nothing(
     with server.connect() as sock:
         sock.sendall(server.head(len(body) * 2) + body)
         sock.shutdown(socket.SHUT_WR)
+    # Wait for the app to have seen the hang-up: before it reads the request there is no
+    # temporary file either, and "none left" would pass too early.
+    wait_for("the app to count the cut-off upload", lambda: _refused(server, "client-disconnected"))
     wait_for("the server to drop the upload", lambda: server.storage.temporary_uploads() == [])
     assert server.nothing_stored()
 
@@ -130,15 +133,19 @@ def test_a_body_longer_than_its_content_length_is_caught_by_its_checksum(
     if status == 422:
         assert problem_of(headers, reply) == "checksum-mismatch"
 
-    def refused() -> bool:
-        metrics = httpx.get(f"{server.service.url}/metrics", timeout=30).text
-        return any(
-            f'fleetcal_uploads_total{{outcome="{outcome}"}} 1.0' in metrics
-            for outcome in ("checksum-mismatch", "client-disconnected")
-        )
-
-    wait_for("the app to refuse the upload", refused)
+    wait_for(
+        "the app to refuse the upload",
+        lambda: _refused(server, "checksum-mismatch", "client-disconnected"),
+    )
     assert server.nothing_stored()
+
+
+def _refused(server: Server, *outcomes: str) -> bool:
+    """Whether the app has counted one upload ending with one of `outcomes`."""
+    metrics = httpx.get(f"{server.service.url}/metrics", timeout=30).text
+    return any(
+        f'fleetcal_uploads_total{{outcome="{outcome}"}} 1.0' in metrics for outcome in outcomes
+    )
 
 
 def test_a_content_length_over_the_limit_is_refused_before_the_body(server: Server) -> None:

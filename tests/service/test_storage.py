@@ -166,3 +166,16 @@ def test_local_commit_is_an_atomic_rename(tmp_path: Path) -> None:
     assert (tmp_path / "recordings" / "R1" / "run").read_bytes() == b"abc"
     assert storage.temporary_uploads() == []
     assert isinstance(storage.open("recordings/R1/run"), io.BufferedReader)
+
+
+def test_keys_older_than_lists_the_objects_of_a_folder(storage: Storage) -> None:
+    for key in ("recordings/R1/a", "recordings/R2/b", "reports/c", "recordings-old/d"):
+        pending = storage.begin_upload(key)
+        pending.write(b"x")
+        pending.commit()
+    assert sorted(storage.keys_older_than("recordings", timedelta(seconds=-5))) == [
+        "recordings/R1/a",
+        "recordings/R2/b",
+    ]
+    assert list(storage.keys_older_than("recordings", timedelta(hours=1))) == []  # still fresh
+    assert list(storage.keys_older_than("nothing-here", timedelta(seconds=-5))) == []

@@ -263,3 +263,53 @@ def test_a_real_connection_dropped_mid_upload_leaves_nothing(
             assert time.monotonic() < deadline, f"left behind: {_stored(services)}"
             time.sleep(0.05)
         assert _run_count(services) == 0
+
+
+def test_recordings_no_run_points_at_are_swept_at_start(tmp_path: Path) -> None:
+    """A process killed between moving an upload into place and committing its run leaves an
+    orphan recording; the next start removes it once it is old, and nothing a run needs."""
+    import os
+
+    from service import repository
+    from service.enums import RunKind
+
+    services = start_services(Settings(data_dir=tmp_path))
+    kept_key = repository.recording_key("R1", uuid.uuid4())
+    with services.db.transaction() as session:
+        repository.record_upload(
+            session,
+            repository.NewUpload(
+                run_id=uuid.UUID(kept_key.rsplit("/", 1)[-1]),
+                robot_id="R1",
+                kind=RunKind.END_OF_LINE,
+                size=1,
+                sha256="0" * 64,
+                format="mcap",
+                storage_key=kept_key,
+                idempotency_key=None,
+                config=None,
+                max_attempts=3,
+            ),
+            create_robot=True,
+        )
+    services.db.dispose()
+    storage = services.storage
+    assert isinstance(storage, LocalStorage)
+    orphan, fresh = (
+        repository.recording_key("R1", uuid.uuid4()),
+        repository.recording_key("R2", uuid.uuid4()),
+    )
+    foreign = "recordings/R1/not-a-run-id"
+    old = time.time() - 7 * 3600
+    for key in (kept_key, orphan, fresh, foreign):
+        pending = storage.begin_upload(key)
+        pending.write(b"a recording")
+        pending.commit()
+        if key != fresh:
+            os.utime(storage.path(key), (old, old))
+
+    start_services(Settings(data_dir=tmp_path)).db.dispose()
+
+    assert storage.exists(kept_key) and storage.exists(fresh)
+    assert storage.exists(foreign)  # not a key the service writes: left alone
+    assert not storage.exists(orphan)
