@@ -90,6 +90,12 @@ class SegmentationConfig(BaseModel):
     smooth_objects: bool = Field(
         default=True, description="object points are projected onto their local plane (range noise)"
     )
+    surface_model: Literal["plane", "quadric"] = Field(
+        default="quadric",
+        description="the local surface object points are projected onto and take normals from: "
+        "a plane flattens curved objects by a few millimetres over a patch (biased with the view, "
+        "6 mm on full-rate cylinders); a quadric follows them",
+    )
     seed: int = 0
 
 
@@ -293,7 +299,10 @@ def segment(
     normals = np.zeros((0, 3))
     if len(objects) >= 3:
         projected, normals = local_planes(
-            objects, config.surface_neighbours, config.surface_centre_neighbours
+            objects,
+            config.surface_neighbours,
+            config.surface_centre_neighbours,
+            quadric=config.surface_model == "quadric",
         )
         # The sensor sits at the origin: the beam to p is p / |p|.
         cos = np.abs(np.einsum("ni,ni->n", normals, objects)) / np.linalg.norm(objects, axis=1)

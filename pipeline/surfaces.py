@@ -14,16 +14,26 @@ from pipeline.transforms import Points
 
 
 def local_planes(
-    points: Points, neighbours: int, centre_neighbours: int | None = None
+    points: Points,
+    neighbours: int,
+    centre_neighbours: int | None = None,
+    *,
+    quadric: bool = False,
 ) -> tuple[Points, Points]:
-    """Each point projected onto its local plane, and that plane's unit normal: (N, 3), (N, 3).
+    """Each point projected onto its local surface, and that surface's unit normal there:
+    (N, 3), (N, 3).
 
-    The normal is the least-spread direction of the `neighbours` nearest points; the plane goes
-    through the centroid of the `centre_neighbours` nearest (all `neighbours` when None). The
+    The plane's normal is the least-spread direction of the `neighbours` nearest points; the plane
+    goes through the centroid of the `centre_neighbours` nearest (all `neighbours` when None). The
     projection removes the range noise across the surface while keeping the sampling along it;
     without it the nearest noisy neighbour is biased towards the query point, which shrinks every
     residual and makes the iterations crawl. A smaller centring patch flattens curved surfaces
     (cylinders, capsules) less: the flattening depends on the viewpoint and biases the fit.
+
+    `quadric=True` (moving least squares of degree 2) does not flatten at all: over the same
+    neighbours, heights above the plane through the point are fitted with a quadratic in the
+    plane's coordinates; the point moves to the fitted height and takes the fitted surface's
+    normal there (`centre_neighbours` is then unused). Needs `neighbours` >= 10.
     """
     if len(points) < 3:
         return points.copy(), np.tile(np.array([0.0, 0.0, 1.0]), (len(points), 1))
@@ -43,12 +53,39 @@ def local_planes(
     covariance[:, 0, 2] = covariance[:, 2, 0] = np.einsum("nk,nk->n", x, z)
     covariance[:, 1, 2] = covariance[:, 2, 1] = np.einsum("nk,nk->n", y, z)
     normals = smallest_eigenvectors(covariance)
+    if quadric and k >= 10:
+        return _quadric_surfaces(points, idx, normals)
     if centre_neighbours is not None and centre_neighbours < k:
         # pykdtree returns the neighbours nearest first.
         near = idx[:, :centre_neighbours]
         centroid = np.column_stack([points[:, axis][near].mean(axis=1) for axis in range(3)])
     offset = np.einsum("ni,ni->n", normals, points - centroid)
     return points - offset[:, None] * normals, normals
+
+
+def _quadric_surfaces(
+    points: Points, idx: NDArray[np.integer], normals: Points
+) -> tuple[Points, Points]:
+    """Project each point onto `h = c0 + c1 a + c2 b + c3 a^2 + c4 ab + c5 b^2`, fitted by least
+    squares to its neighbours `idx` (N, k) in the frame (a, b along the plane, h along `normals`)
+    centred at the point; return the projections and the fitted normals there."""
+    # Any orthonormal tangent pair will do: the full quadratic does not depend on its rotation.
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(normals, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(normals, u)
+    offsets = points[idx] - points[:, None, :]  # (N, k, 3)
+    a = np.einsum("nki,ni->nk", offsets, u)
+    b = np.einsum("nki,ni->nk", offsets, v)
+    h = np.einsum("nki,ni->nk", offsets, normals)
+    design = np.stack([np.ones_like(a), a, b, a * a, a * b, b * b], axis=2)  # (N, k, 6)
+    # A tiny ridge keeps degenerate patches (collinear neighbours) solvable.
+    gram = np.einsum("nki,nkj->nij", design, design) + 1e-9 * np.eye(6)
+    coefficients = np.linalg.solve(gram, np.einsum("nki,nk->ni", design, h)[:, :, None])[:, :, 0]
+    projected = points + coefficients[:, :1] * normals
+    fitted = normals - coefficients[:, 1:2] * u - coefficients[:, 2:3] * v
+    fitted /= np.linalg.norm(fitted, axis=1, keepdims=True)
+    return projected, fitted
 
 
 def smallest_eigenvectors(covariance: NDArray[np.float64]) -> Points:
