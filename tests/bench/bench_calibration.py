@@ -1,7 +1,7 @@
 """Accuracy, convergence, stage times and peak memory of the calibration (issue 3's protocol).
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -m tests.bench.bench_calibration [--quick]
-        [--seeds 10] [--first-seed 0] [--rate 0.25] [--cases set1-box ...]
+        [--seeds 10] [--first-seed 0] [--rate 1.0] [--cases set1-box ...]
         [--methods proposed ...]
         [--no-timing] [--plot convergence.png] [--recordings DIR]
 
@@ -362,7 +362,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="2 seeds, rate 0.1, two cases")
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0)
-    parser.add_argument("--rate", type=float, default=0.25, help="LiDAR rate scale of trials")
+    parser.add_argument(
+        "--rate", type=float, default=1.0, help="LiDAR point rate scale of the trials (1: full)"
+    )
     parser.add_argument("--cases", nargs="*", default=list(CASES))
     parser.add_argument("--methods", nargs="*", default=list(METHODS))
     parser.add_argument("--no-timing", action="store_true")
