@@ -164,14 +164,22 @@ def denoise(
         return _untouched(
             cloud, cfg, start, f"{len(cloud)} points are too few to judge with k={cfg.k}; kept all"
         )
-    rows, population = _judged_rows(cloud, cfg, judge)
-    both = rows if population is None else np.union1d(rows, population)
-    found = nearest_neighbours(cloud, cfg.k, None if judge is None else both)
-    at_rows = np.searchsorted(both, rows)
-    neighbours = Neighbours(found.mean_distance[at_rows], found.index[at_rows])
+    # Every point judged: one kNN query over the cloud. Some judged: a query for them and for a
+    # random sample of the cloud, which gives the cloud-wide statistics (`population`).
+    rows: NDArray[np.intp] | None = None
+    population: tuple[NDArray[np.float64], NDArray[np.intp]] | None = None
+    if judge is None:
+        neighbours, points = nearest_neighbours(cloud, cfg.k), cloud
+    else:
+        rows, sample_rows = _judged_rows(cloud, cfg, judge)
+        queried = np.union1d(rows, sample_rows)
+        found = nearest_neighbours(cloud, cfg.k, queried)
+        at = np.searchsorted(queried, rows)
+        neighbours = Neighbours(found.mean_distance[at], found.index[at])
+        population = (found.mean_distance[np.searchsorted(queried, sample_rows)], sample_rows)
+        points = cloud[rows]
     mu = neighbours.mean_distance
-    sample = None if population is None else found.mean_distance[np.searchsorted(both, population)]
-    points = cloud[rows]
+    sample = None if population is None else population[0]
     centre: Points | None = None
     if cfg.method is DenoiseMethod.PATTERN:
         judged = pattern_keep(
@@ -182,7 +190,7 @@ def denoise(
             beam_extent=cfg.beam_extent,
             cell_deg=cfg.cell_deg,
             rows=rows,
-            population=None if population is None or sample is None else (sample, population),
+            population=population,
         )
     elif cfg.method is DenoiseMethod.SOR:
         judged = sor_keep(mu, cfg.cs, sample)
@@ -201,18 +209,17 @@ def denoise(
         judged = proposed_keep(
             mu, points, centre, cfg.cs, cfg.cr, floored=floored, population=sample
         )
-    keep = np.ones(len(cloud), dtype=np.bool_)
-    keep[rows] = judged
-    return DenoiseResult(keep, cfg.method, time.perf_counter() - start, centre, None, len(rows))
+    keep = judged
+    if rows is not None:
+        keep = np.ones(len(cloud), dtype=np.bool_)
+        keep[rows] = judged
+    return DenoiseResult(keep, cfg.method, time.perf_counter() - start, centre, None, len(points))
 
 
 def _judged_rows(
-    cloud: Points, cfg: DenoiseConfig, judge: ArrayLike | None
-) -> tuple[NDArray[np.intp], NDArray[np.intp] | None]:
-    """Rows to judge, and the random rows the cloud-wide statistics come from (None: the judged
-    rows themselves, which are then every row)."""
-    if judge is None:
-        return np.arange(len(cloud)), None
+    cloud: Points, cfg: DenoiseConfig, judge: ArrayLike
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Rows to judge, and the random rows the cloud-wide statistics come from."""
     mask = np.asarray(judge, dtype=np.bool_).reshape(-1)
     if mask.shape != (len(cloud),):
         raise BadInputError(
