@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import tarfile
 import tempfile
 import threading
 import time
@@ -98,17 +97,14 @@ def _step(number: int, text: str) -> None:
 
 def _synthesise(scratch: Path, scenario: str, seed: int, rate_scale: float) -> tuple[Truth, Path]:
     from pipeline.synth import get_scenario
-    from pipeline.synth.recording import RECORDING_DIR, write_recording
+    from pipeline.synth.recording import archive_recording, write_recording
 
     spec = get_scenario(scenario)
     _step(2, f"synthesise {scenario}: {spec.description} ({rate_scale:.0%} of the point rate)")
     started = time.monotonic()
     out = scratch / "synth"
     truth = write_recording(spec, out, seed=seed, rate_scale=rate_scale)
-    # A robot uploads its ROS 2 bag directory as one archive.
-    archive = scratch / "recording.tar"
-    with tarfile.open(archive, "w") as tar:
-        tar.add(out / RECORDING_DIR, arcname=RECORDING_DIR)
+    archive = archive_recording(out, scratch / "recording.tar")
     size = archive.stat().st_size / 1e6
     typer.echo(f"          {time.monotonic() - started:.1f} s, {size:.1f} MB bag (tar)")
     return truth, archive

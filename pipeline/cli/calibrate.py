@@ -11,7 +11,13 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from pipeline.cli.common import EXIT_FAILED_VERDICT, EXIT_OK, progress, user_errors
+from pipeline.cli.common import (
+    EXIT_FAILED_VERDICT,
+    EXIT_OK,
+    RecordingPath,
+    progress,
+    user_errors,
+)
 
 if TYPE_CHECKING:
     from pipeline.calibrate import CalibrationResult
@@ -23,10 +29,7 @@ def register(app: typer.Typer) -> None:
 
 
 def calibrate_command(
-    path: Annotated[
-        Path,
-        typer.Argument(help="bag directory, .mcap, .db3, ROS 1 .bag, or .zip/.tar(.gz) of a bag"),
-    ],
+    path: RecordingPath,
     output: Annotated[Path, typer.Option("--output", "-o", help="where to write result.json")],
     config_path: Annotated[
         Path | None,

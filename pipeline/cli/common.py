@@ -1,10 +1,13 @@
-"""What every CLI command shares: turning typed errors into a message and an exit code."""
+"""What every CLI command shares: the recording argument, and typed errors turned into a message
+and an exit code."""
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated
 
 import typer
 
@@ -13,6 +16,12 @@ from pipeline.errors import BadInputError, PipelineError
 EXIT_OK = 0
 EXIT_FAILED_VERDICT = 1
 EXIT_BAD_INPUT = 2
+
+RecordingPath = Annotated[
+    Path,
+    typer.Argument(help="bag directory, .mcap, .db3, ROS 1 .bag, or .zip/.tar(.gz) of a bag"),
+]
+"""The recording a command reads, as its first argument."""
 
 
 @contextmanager

@@ -8,7 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
-from pipeline.cli.common import user_errors
+from pipeline.cli.common import RecordingPath, user_errors
 
 
 def register(app: typer.Typer) -> None:
@@ -16,10 +16,7 @@ def register(app: typer.Typer) -> None:
 
 
 def inspect_command(
-    path: Annotated[
-        Path,
-        typer.Argument(help="bag directory, .mcap, .db3, ROS 1 .bag, or .zip/.tar(.gz) of a bag"),
-    ],
+    path: RecordingPath,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON document")] = False,
     config_path: Annotated[
         Path | None,

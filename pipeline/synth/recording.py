@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import heapq
+import tarfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -87,6 +88,14 @@ def write_recording(
     truth = world.truth({frame: labels_of(items) for frame, items in labels.items()})
     write_truth(truth, out_dir)
     return truth
+
+
+def archive_recording(out: Path, archive: Path) -> Path:
+    """The ROS 2 bag directory `write_recording` wrote under `out`, as one tar file `archive`:
+    what a robot uploads (a bag directory travels as one archive)."""
+    with tarfile.open(archive, "w") as tar:
+        tar.add(out / RECORDING_DIR, arcname=RECORDING_DIR)
+    return archive
 
 
 def _static_edges(world: World) -> list[tuple[str, str, Matrix4]]:

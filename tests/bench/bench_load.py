@@ -21,10 +21,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import io
 import json
 import statistics
-import tarfile
 import tempfile
 import threading
 import time
@@ -51,15 +49,12 @@ FINAL = ("succeeded", "failed")
 
 def tiny_upload() -> bytes:
     from pipeline.synth import write_recording
-    from pipeline.synth.recording import RECORDING_DIR
+    from pipeline.synth.recording import archive_recording
 
     with tempfile.TemporaryDirectory() as scratch:
         out = Path(scratch) / "synth"
         write_recording("tiny", out, seed=0)
-        buffer = io.BytesIO()
-        with tarfile.open(fileobj=buffer, mode="w") as tar:
-            tar.add(out / RECORDING_DIR, arcname=RECORDING_DIR)
-        return buffer.getvalue()
+        return archive_recording(out, Path(scratch) / "recording.tar").read_bytes()
 
 
 @dataclass

@@ -64,14 +64,11 @@ FINAL = ("succeeded", "failed")
 def tiny_recording(tmp_path_factory: pytest.TempPathFactory) -> bytes:
     """The `tiny` scenario's ROS 2 bag directory as a robot uploads it: one tar archive."""
     from pipeline.synth import write_recording
-    from pipeline.synth.recording import RECORDING_DIR
+    from pipeline.synth.recording import archive_recording
 
-    out = tmp_path_factory.mktemp("tiny") / "synth"
-    write_recording("tiny", out, seed=0)
-    buffer = io.BytesIO()
-    with tarfile.open(fileobj=buffer, mode="w") as tar:
-        tar.add(out / RECORDING_DIR, arcname=RECORDING_DIR)
-    return buffer.getvalue()
+    scratch = tmp_path_factory.mktemp("tiny")
+    write_recording("tiny", scratch / "synth", seed=0)
+    return archive_recording(scratch / "synth", scratch / "recording.tar").read_bytes()
 
 
 @dataclass
