@@ -6,7 +6,7 @@ Importable without the service: it never imports FastAPI, SQLAlchemy or the serv
 from typing import TYPE_CHECKING, Any
 
 from pipeline.errors import BadInputError, ConfigError, PipelineError
-from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, Stop
+from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, ScanPattern, Stop
 
 if TYPE_CHECKING:
     from pipeline.calibrate import CalibrationResult, calibrate
@@ -23,6 +23,7 @@ __all__ = [
     "PipelineConfig",
     "PipelineError",
     "RecordingInfo",
+    "ScanPattern",
     "Stop",
     "__version__",
     "calibrate",

@@ -7,6 +7,7 @@ its own frame. Clouds are in their LiDAR's frame; poses are named `T_parent_chil
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -16,12 +17,25 @@ from numpy.typing import NDArray
 from pipeline.transforms import Matrix4
 
 
+class ScanPattern(enum.StrEnum):
+    """How a LiDAR's beams cover its field of view over time."""
+
+    NON_REPETITIVE = "non_repetitive"
+    """Each scan fires new directions (Livox rosette): accumulated over a stop, the points fill
+    surfaces evenly, so a point sparse for its place is suspect (what stage 1 relies on)."""
+    REPETITIVE = "repetitive"
+    """Every scan re-fires the same directions (spinning multi-beam: Velodyne, Ouster, Hesai):
+    accumulated, the points pile up along each beam, on scan lines a few degrees apart."""
+
+
 @dataclass(frozen=True)
 class LidarInfo:
     """One LiDAR of the robot.
 
     `T_base_lidar` is the *initial* extrinsic (tf_static or config), (4, 4) float64.
     `points_per_second` is the mean rate over the recording (all scans, not only stops).
+    `scan_pattern`: repetitive when its PointCloud2 carries a `ring` field (the beam index that
+    spinning LiDARs' drivers publish), else non-repetitive.
     """
 
     frame: str
@@ -29,6 +43,7 @@ class LidarInfo:
     T_base_lidar: Matrix4
     scan_count: int = 0
     points_per_second: float = 0.0
+    scan_pattern: ScanPattern = ScanPattern.NON_REPETITIVE
 
 
 @dataclass(frozen=True)

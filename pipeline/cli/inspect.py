@@ -92,7 +92,8 @@ def render(document: dict[str, Any]) -> str:
         )
         lines.append(
             f"  {lidar['frame']:<{width}}  {lidar['topic']}  {lidar['scans']} scans, "
-            f"{lidar['points_per_second'] / 1000:.1f} k points/s; {pose}"
+            f"{lidar['points_per_second'] / 1000:.1f} k points/s, "
+            f"{lidar['scan_pattern'].replace('_', '-')} scans; {pose}"
         )
     stops = document["stops"]
     mean = sum(stop["duration"] for stop in stops) / len(stops)

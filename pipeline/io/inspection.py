@@ -45,6 +45,7 @@ def report(summary: RecordingSummary, warnings: tuple[str, ...]) -> dict[str, An
                 "points": lidar.points,
                 "scans": lidar.scans,
                 "points_per_second": lidar.points_per_second,
+                "scan_pattern": str(lidar.scan_pattern),
                 "valid_points_in_stops": sum(
                     stop.clouds[lidar.frame].valid_points
                     for stop in summary.stops

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.io.errors import CorruptRecordingError
+from pipeline.problem import ScanPattern
 
 # sensor_msgs/PointField datatype codes -> numpy kinds (only floats make sense for coordinates).
 _FLOAT_TYPES = {7: "f4", 8: "f8"}
@@ -25,6 +26,17 @@ _FIELD_NAMES = {
     7: "float32",
     8: "float64",
 }
+
+
+# The per-point beam index that the drivers of spinning multi-beam LiDARs publish (velodyne,
+# ouster, hesai, rslidar); Livox drivers publish `tag` and `line` instead.
+RING_FIELD = "ring"
+
+
+def scan_pattern(msg: Any) -> ScanPattern:
+    """Repetitive when the message's points carry a `ring` field (a spinning LiDAR), else not."""
+    names = {field.name for field in msg.fields}
+    return ScanPattern.REPETITIVE if RING_FIELD in names else ScanPattern.NON_REPETITIVE
 
 
 def point_count(msg: Any) -> int:

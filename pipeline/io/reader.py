@@ -24,7 +24,7 @@ from pipeline.io.errors import (
     TooFewLidarsError,
 )
 from pipeline.io.motion import Motion, read_motion
-from pipeline.io.pointcloud import decode_xyz, point_count
+from pipeline.io.pointcloud import decode_xyz, point_count, scan_pattern
 from pipeline.io.source import (
     OpenRecording,
     connections_of,
@@ -37,7 +37,7 @@ from pipeline.io.stops import StopSpan, detect_stops, still_runs
 from pipeline.io.summary import LidarSummary, RecordingSummary, StopSummary
 from pipeline.io.tf_tree import normalize_frame
 from pipeline.io.typestores import POINTCLOUD2
-from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, Stop
+from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, ScanPattern, Stop
 
 # Scans reach the bag after their stamp; a stop is closed once the log time is this far past it.
 _CLOSE_SLACK_NS = 2_000_000_000
@@ -55,7 +55,12 @@ def read_recording(path: Path | str, config: ReaderConfig | None = None) -> Cali
     require_extrinsics(summary)
     lidars = tuple(
         LidarInfo(
-            lidar.frame, lidar.topic, lidar.T_base_lidar, lidar.scans, lidar.points_per_second
+            lidar.frame,
+            lidar.topic,
+            lidar.T_base_lidar,
+            lidar.scans,
+            lidar.points_per_second,
+            lidar.scan_pattern,
         )
         for lidar in summary.lidars
         if lidar.T_base_lidar is not None
@@ -144,15 +149,16 @@ class _TopicStats:
     points: int = 0
     first_ns: int = 0
     last_ns: int = 0
+    scan_pattern: ScanPattern = ScanPattern.NON_REPETITIVE
 
-    def add(self, frame: str, stamp: int, points: int) -> None:
+    def add(self, frame: str, stamp: int, points: int, pattern: ScanPattern) -> None:
         if self.scans and frame != self.frame:
             raise RecordingError(
                 f"{self.topic} carries scans of two frames ({self.frame!r}, then {frame!r}); "
                 "publish each LiDAR on its own topic with one frame_id"
             )
         if not self.scans:
-            self.frame, self.first_ns = frame, stamp
+            self.frame, self.first_ns, self.scan_pattern = frame, stamp, pattern
         self.scans += 1
         self.points += points
         self.first_ns, self.last_ns = min(self.first_ns, stamp), max(self.last_ns, stamp)
@@ -225,7 +231,7 @@ def _read_clouds(
                     f"scans on {topic} have an empty header.frame_id; name each LiDAR's frame"
                 )
             stamp = stamp_ns(msg.header) or log_ns
-            stats[topic].add(frame, stamp, point_count(msg))
+            stats[topic].add(frame, stamp, point_count(msg), scan_pattern(msg))
             points = None
             if clouds.stop_index(stamp) is not None:
                 points = decode_xyz(
@@ -273,6 +279,7 @@ def _lidars(
                 period_s=clouds.period_ns(s.frame) * 1e-9,
                 T_base_lidar=None if T is None else np.asarray(T, dtype=np.float64),
                 extrinsic_source=None if T is None else source,
+                scan_pattern=s.scan_pattern,
             )
         )
     return tuple(lidars), notes

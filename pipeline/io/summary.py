@@ -8,6 +8,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from pipeline.io.stop_clouds import StopCloud
+from pipeline.problem import ScanPattern
 from pipeline.transforms import Matrix4
 
 
@@ -17,6 +18,7 @@ class LidarSummary:
 
     `points` counts every point published (`width * height`, valid or not); `period_s` is the
     median spacing of its scan stamps. `extrinsic_source` is `config`, `tf_static` or None.
+    `scan_pattern`: from its first scan's fields (see `pointcloud.scan_pattern`).
     """
 
     frame: str
@@ -27,6 +29,7 @@ class LidarSummary:
     period_s: float
     T_base_lidar: Matrix4 | None
     extrinsic_source: str | None
+    scan_pattern: ScanPattern = ScanPattern.NON_REPETITIVE
 
     @property
     def points_per_second(self) -> float:

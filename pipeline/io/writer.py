@@ -10,7 +10,7 @@ import enum
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,8 +26,8 @@ from pipeline.io.typestores import (
 )
 from pipeline.transforms import Matrix4, to_translation_xyzw
 
-_FLOAT32 = 7  # sensor_msgs/PointField datatype codes
-_FLOAT64 = 8
+# sensor_msgs/PointField datatype codes by numpy kind.
+_DATATYPES = {"i1": 1, "u1": 2, "i2": 3, "u2": 4, "i4": 5, "u4": 6, "f4": 7, "f8": 8}
 
 
 class WriterFormat(enum.StrEnum):
@@ -83,26 +83,41 @@ class RecordingWriter:
         frame_id: str,
         points: NDArray[np.floating[Any]],
         *,
-        extra_fields: Mapping[str, NDArray[np.floating[Any]]] | None = None,
+        extra_fields: Mapping[str, NDArray[Any]] | None = None,
         dtype: type[np.floating[Any]] = np.float32,
         big_endian: bool = False,
     ) -> None:
-        """One scan: (N, 3) `points` in `frame_id`, plus optional per-point scalar fields."""
+        """One scan: (N, 3) `points` in `frame_id` as `dtype`, plus optional per-point scalar
+        fields, each stored in its own array's type (e.g. a spinning LiDAR's `ring` as uint16)."""
         points = np.asarray(points)
-        fields = {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2], **(extra_fields or {})}
-        np_dtype = np.dtype(dtype).newbyteorder(">" if big_endian else "<")
-        record = np.empty(len(points), dtype=[(name, np_dtype) for name in fields])
+        order: Literal[">", "<"] = ">" if big_endian else "<"
+        xyz_dtype = np.dtype(dtype)
+        fields = {
+            "x": points[:, 0].astype(xyz_dtype, copy=False),
+            "y": points[:, 1].astype(xyz_dtype, copy=False),
+            "z": points[:, 2].astype(xyz_dtype, copy=False),
+            **{name: np.asarray(values) for name, values in (extra_fields or {}).items()},
+        }
+        record = np.empty(
+            len(points),
+            dtype=[(name, values.dtype.newbyteorder(order)) for name, values in fields.items()],
+        )
         for name, values in fields.items():
             record[name] = values
-        code = _FLOAT32 if np_dtype.itemsize == 4 else _FLOAT64
+        offsets = {name: int(spec[1]) for name, spec in (record.dtype.fields or {}).items()}
         point_field = self._store.types["sensor_msgs/msg/PointField"]
         msg = self._store.types[POINTCLOUD2](
             header=self._header(stamp_ns, frame_id),
             height=1,
             width=len(points),
             fields=[
-                point_field(name=name, offset=i * np_dtype.itemsize, datatype=code, count=1)
-                for i, name in enumerate(fields)
+                point_field(
+                    name=name,
+                    offset=offsets[name],
+                    datatype=_DATATYPES[record.dtype[name].str[1:]],
+                    count=1,
+                )
+                for name in fields
             ],
             is_bigendian=big_endian,
             point_step=record.dtype.itemsize,

@@ -15,6 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from pipeline.problem import ScanPattern
+
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
 # Firing instants sit on a global grid k / rate; this slack keeps t0 * rate = 29999.999999 from
 # being rounded to the next firing (scan starts are multiples of 0.1 s, not exact in binary).
@@ -74,6 +76,14 @@ class Mid70(BaseModel):
         """Centre of the scan pattern in the LiDAR frame."""
         return np.array([1.0, 0.0, 0.0])
 
+    @property
+    def scan_pattern(self) -> ScanPattern:
+        return ScanPattern.NON_REPETITIVE
+
+    def point_fields(self, points: NDArray[np.float64]) -> dict[str, NDArray[np.generic]]:
+        """Fields the driver publishes beside x, y, z (the reader ignores intensity)."""
+        return {}
+
     def rate(self, rate_scale: float = 1.0) -> float:
         return self.points_per_second * rate_scale
 
@@ -124,6 +134,19 @@ class SpinningLidar(BaseModel):
     @property
     def scan_period_s(self) -> float:
         return 1.0 / self.rotation_hz
+
+    @property
+    def scan_pattern(self) -> ScanPattern:
+        return ScanPattern.REPETITIVE
+
+    def point_fields(self, points: NDArray[np.float64]) -> dict[str, NDArray[np.generic]]:
+        """`ring`: each point's beam index (uint16, 0 = lowest elevation), as spinning LiDARs'
+        drivers publish it; recovered from the point's elevation (range noise keeps directions)."""
+        low, high = self.elevation_deg
+        elevation = np.degrees(np.arctan2(points[:, 2], np.hypot(points[:, 0], points[:, 1])))
+        step = (high - low) / max(self.beams - 1, 1)
+        ring = np.clip(np.rint((elevation - low) / step), 0, self.beams - 1)
+        return {"ring": ring.astype(np.uint16)}
 
     @property
     def optical_axis(self) -> NDArray[np.float64]:

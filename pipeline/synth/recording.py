@@ -79,7 +79,10 @@ def write_recording(
                     scan.stamp_ns,
                     mount.frame,
                     scan.points,
-                    extra_fields={"intensity": scan.intensity},
+                    extra_fields={
+                        "intensity": scan.intensity,
+                        **mount.model.point_fields(scan.points),
+                    },
                 )
             # Only the labels are kept (the points went to the bag): memory stays small.
             labels[mount.frame].append(

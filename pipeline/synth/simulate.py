@@ -315,6 +315,7 @@ def simulate_problem(
                 T_base_lidar=world.T_base_lidar_initial[i],
                 scan_count=world.scan_count(i),
                 points_per_second=mount.model.rate(world.rate_scale),
+                scan_pattern=mount.model.scan_pattern,
             )
             for i, mount in enumerate(spec.lidars)
         ),

@@ -50,6 +50,8 @@ class Spec:
     lidars: Sequence[str] = ("lidar_front", "lidar_rear")
     float64_lidars: Sequence[str] = ("lidar_rear",)
     big_endian_lidars: Sequence[str] = ("lidar_rear",)
+    ring_lidars: Sequence[str] = ("lidar_rear",)
+    """Their scans carry a uint16 `ring` field, as spinning LiDARs' drivers publish."""
     nan_fraction_of: dict[str, float] = field(default_factory=dict)
     """Per-LiDAR override of `nan_fraction` (1.0: a dead LiDAR)."""
     footprint_height: float | None = None
@@ -151,7 +153,14 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
                     stamp,
                     f + name,
                     points,
-                    extra_fields={"intensity": rng.uniform(0, 100, len(points))},
+                    extra_fields={
+                        "intensity": rng.uniform(0, 100, len(points)),
+                        **(
+                            {"ring": np.arange(len(points), dtype=np.uint16) % 16}
+                            if name in spec.ring_lidars
+                            else {}
+                        ),
+                    },
                     dtype=np.float64 if name in spec.float64_lidars else np.float32,
                     big_endian=name in spec.big_endian_lidars,
                 )

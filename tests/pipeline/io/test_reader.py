@@ -22,6 +22,7 @@ from pipeline.io.errors import (
     UnknownFormatError,
 )
 from pipeline.io.writer import RecordingWriter, WriterFormat
+from pipeline.problem import ScanPattern
 from pipeline.transforms import apply, pose_difference, to_translation_xyzw
 from tests.pipeline.io.conftest import SCENE
 from tests.pipeline.io.recordings import Spec, Truth, write_recording
@@ -64,6 +65,11 @@ def test_every_format_reads_back_the_scene(
     ]
     assert problem.base_frame == "base_link" and problem.odom_frame == "odom"
     assert len(problem.stops) == SCENE.stops
+    # The rear LiDAR's scans carry a ring field: a spinning LiDAR's.
+    assert [lidar.scan_pattern for lidar in problem.lidars] == [
+        ScanPattern.NON_REPETITIVE,
+        ScanPattern.REPETITIVE,
+    ]
     for lidar in problem.lidars:
         assert lidar.scan_count == 81  # 8 s at 10 Hz, both ends included
         assert lidar.points_per_second == pytest.approx(SCENE.points * SCENE.scan_hz)

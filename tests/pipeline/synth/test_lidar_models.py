@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from pipeline.problem import ScanPattern
 from pipeline.synth.lidar_models import Mid70, SpinningLidar
 
 
@@ -68,6 +69,19 @@ def test_spinning_lidar_keeps_only_the_azimuth_mask() -> None:
     assert elevation.min() == pytest.approx(-15.0) and elevation.max() == pytest.approx(15.0)
     assert len(firing) == pytest.approx(model.rate() * model.scan_period_s, rel=0.01)
     np.testing.assert_allclose(model.optical_axis, [1.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_spinning_lidar_publishes_each_points_beam_as_ring() -> None:
+    model = SpinningLidar(azimuth_mask_deg=(-70.0, 70.0))
+    firing = model.firing(0.0, model.scan_period_s)
+    ranges = np.random.default_rng(0).uniform(0.5, 20.0, len(firing))
+    ring = model.point_fields(firing.directions * ranges[:, None])["ring"]
+    assert ring.dtype == np.uint16
+    # Beams of one column fire together, lowest elevation first.
+    np.testing.assert_array_equal(ring, np.tile(np.arange(model.beams), len(firing) // model.beams))
+    assert model.scan_pattern is ScanPattern.REPETITIVE
+    assert Mid70().scan_pattern is ScanPattern.NON_REPETITIVE
+    assert Mid70().point_fields(firing.directions) == {}
 
 
 def test_spinning_mask_must_be_ordered() -> None:

@@ -10,6 +10,7 @@ import pytest
 
 from pipeline.errors import BadInputError
 from pipeline.io import read_recording, summarize_recording
+from pipeline.problem import ScanPattern
 from pipeline.synth import load_truth, make_world
 from pipeline.synth.recording import write_recording
 from pipeline.transforms import apply, pose_difference
@@ -85,6 +86,7 @@ def test_reader_recovers_frames_extrinsics_stops_and_floor(tiny_dir: Path, name:
         )
         assert translation < 1e-6 and rotation < 1e-4
         assert lidar.scan_count == 67
+        assert lidar.scan_pattern is ScanPattern.NON_REPETITIVE  # Mid-70s
     assert len(problem.stops) == len(truth.stops)
     for stop, true_stop in zip(problem.stops, truth.stops, strict=True):
         assert true_stop.t_start - 1e-6 <= stop.t_start < stop.t_end <= true_stop.t_end + 1e-6
@@ -109,6 +111,12 @@ def test_scans_are_published_while_moving_too(tiny_dir: Path) -> None:
     world = make_world("tiny", SEED)
     stop_scans = sum(len(world.stop_scans(0, j)) for j in range(len(truth.stops)))
     assert stop_scans < 67
+
+
+def test_spinning_lidars_publish_a_ring_field_and_read_as_repetitive(tmp_path: Path) -> None:
+    write_recording("spinning", tmp_path / "spinning", seed=1, rate_scale=0.02)
+    summary = summarize_recording(tmp_path / "spinning" / "recording", keep_points=False)
+    assert {lidar.scan_pattern for lidar in summary.lidars} == {ScanPattern.REPETITIVE}
 
 
 def test_same_seed_same_bytes(tiny_dir: Path, tmp_path: Path) -> None:

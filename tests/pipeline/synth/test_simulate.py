@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.problem import CalibrationProblem
+from pipeline.problem import CalibrationProblem, ScanPattern
 from pipeline.synth import Truth, get_scenario, make_world, scan, simulate_problem
 from pipeline.synth.motion import ArcMotion
 from pipeline.synth.scene import SceneObject
@@ -191,3 +191,4 @@ def test_spinning_lidars_see_the_floor_and_objects() -> None:
         assert len(labels) > 1000 and (labels.object_index >= 0).any()
     axis = truth.lidar("lidar_front").optical_axis
     np.testing.assert_allclose(axis, [1.0, 0.0, 0.0], atol=1e-12)
+    assert {lidar.scan_pattern for lidar in problem.lidars} == {ScanPattern.REPETITIVE}
