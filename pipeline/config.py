@@ -50,14 +50,11 @@ class PipelineConfig(BaseModel):
 
     reader: ReaderConfig = ReaderConfig()
     frames: FramesConfig = FramesConfig()
-    denoise: DenoiseConfig = DenoiseConfig(enabled=False, density_ratio=2.5)
-    """Off by default: it does not make every calibration more accurate yet. Switched on, it judges
-    only the points standing above each cloud's floor (`prepare`, about 2 s for a full-rate set-1
-    recording) with a density ratio stricter than the filter's own (2.5, not 1.8: with 1.8 it
-    also removes surface points seen at grazing incidence, 2-4 mm worse on cylinders). Calibration
-    benchmark, full rate, 10 seeds per case, on - off: Mid-70 cases -0.09 mm and -0.003 deg over
-    70 paired trials; the spinning LiDAR 6.0 mm against 2.0 mm (its scan lines lose points).
-    Switch it on for Livox-type (non-repetitive) scanners."""
+    denoise: DenoiseConfig = DenoiseConfig(density_ratio=2.5)
+    """The pipeline judges only the points standing above each cloud's floor (`prepare`) of the
+    LiDARs with non-repetitive scans (`stage_1_filters`), with a density ratio stricter than the
+    filter's own (2.5, not 1.8: with 1.8 it also removes surface points seen at grazing incidence,
+    2-4 mm worse on cylinders)."""
     segmentation: SegmentationConfig = SegmentationConfig()
     rough_refinement: RoughRefinementConfig = RoughRefinementConfig()
     optimisation: OptimisationConfig = OptimisationConfig()

@@ -34,6 +34,7 @@ from pipeline.denoise.filters import (
     sor_mask,
 )
 from pipeline.errors import BadInputError
+from pipeline.problem import ScanPattern
 
 __all__ = [
     "DenoiseConfig",
@@ -104,6 +105,12 @@ class DenoiseConfig(BaseModel):
     )
     seed: int = Field(
         default=0, description="seed of the floor RANSAC and of the sample (results reproducible)"
+    )
+    scan_patterns: dict[str, ScanPattern] = Field(
+        default_factory=dict,
+        description="the pipeline filters only non-repetitive LiDARs' clouds; this maps a LiDAR "
+        "frame to its scan pattern where the recording says otherwise (a spinning LiDAR whose "
+        "driver publishes no ring field: repetitive)",
     )
 
 

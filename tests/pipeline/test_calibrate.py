@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.calibrate import STAGES, calibrate
+from pipeline.calibrate import STAGES, calibrate, prepare
 from pipeline.config import PipelineConfig
 from pipeline.denoise import DenoiseConfig
 from pipeline.errors import BadInputError
+from pipeline.problem import ScanPattern
 from pipeline.transforms import invert, pose_difference
 from tests.pipeline.calibration_data import (
     box_calibration,
@@ -76,9 +77,38 @@ def test_unknown_reference_and_single_stop_are_bad_input() -> None:
         calibrate(dataclasses.replace(problem, stops=problem.stops[:1]))
 
 
-def test_stage_1_is_off_by_default_and_says_so() -> None:
-    denoise = box_calibration().stages["denoise"]
-    assert denoise.details["enabled"] is False and denoise.details["removed_points"] == 0
+def test_stage_1_filters_every_non_repetitive_lidar_by_default() -> None:
+    denoise = box_calibration().stages["denoise"].details
+    assert denoise["enabled"] is True and denoise["filtered_frames"] == "lidar_front,lidar_rear"
+    assert int(denoise["judged_points"]) > 0
+
+
+def test_stage_1_leaves_repetitive_scans_alone() -> None:
+    problem, _ = box_problem()
+    spinning_rear = dataclasses.replace(
+        problem,
+        lidars=tuple(
+            dataclasses.replace(lidar, scan_pattern=ScanPattern.REPETITIVE)
+            if lidar.frame == "lidar_rear"
+            else lidar
+            for lidar in problem.lidars
+        ),
+    )
+    prepared = prepare(spinning_rear, PipelineConfig())
+    assert prepared.filtered_frames == ("lidar_front",)
+    rear = [cloud for cloud in prepared.clouds[1]]
+    assert [len(c) for c in rear] == [len(stop.clouds["lidar_rear"]) for stop in problem.stops]
+    # The config overrides what the recording says, either way.
+    told = PipelineConfig.model_validate(
+        {
+            "denoise": {
+                "scan_patterns": {"lidar_rear": "non_repetitive", "lidar_front": "repetitive"}
+            }
+        }
+    )
+    assert prepare(spinning_rear, told).filtered_frames == ("lidar_rear",)
+    off = PipelineConfig.model_validate({"denoise": {"enabled": False}})
+    assert prepare(problem, off).filtered_frames == ()
 
 
 def test_stage_1_judges_only_what_stands_above_the_floor() -> None:
