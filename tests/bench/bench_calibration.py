@@ -195,6 +195,48 @@ def accuracy_table(results: dict[str, list[dict[str, Trial]]], methods: Sequence
     return "\n".join(lines)
 
 
+PAIRS = (("with_stage1", "without_stage1"), ("proposed", "point_to_point"))
+"""Methods compared trial by trial when both ran: (candidate, baseline)."""
+
+
+def paired_table(results: dict[str, list[dict[str, Trial]]], method: str, baseline: str) -> str:
+    """Per case and pooled: the mean of (method - baseline) over the same trials and LiDARs, its
+    standard error, and how many came out worse by more than 0.5 mm / 0.01 deg."""
+    lines = [
+        f"| case | pairs | {method} - {baseline}: t mm (sem) | r deg (sem) "
+        "| worse by > 0.5 mm | worse by > 0.01 deg |",
+        "|---|---|---|---|---|---|",
+    ]
+    pooled: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    for case, trials in [*results.items(), ("all", [])]:
+        if case == "all":
+            if len(pooled) < 2:
+                break
+            dt = np.concatenate([t for t, _ in pooled])
+            dr = np.concatenate([r for _, r in pooled])
+        else:
+            both = [trial for trial in trials if method in trial and baseline in trial]
+            if not both:
+                continue
+            dt = 1000 * np.concatenate(
+                [np.subtract(t[method].translation, t[baseline].translation) for t in both]
+            )
+            dr = np.concatenate(
+                [np.subtract(t[method].rotation, t[baseline].rotation) for t in both]
+            )
+            pooled.append((dt, dr))
+
+        def sem(values: NDArray[np.float64]) -> float:
+            return float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
+
+        lines.append(
+            f"| {case} | {len(dt)} | {dt.mean():+.2f} ({sem(dt):.2f}) "
+            f"| {dr.mean():+.4f} ({sem(dr):.4f}) | {int((dt > 0.5).sum())} "
+            f"| {int((dr > 0.01).sum())} |"
+        )
+    return "\n".join(lines)
+
+
 def stage_table(results: dict[str, list[dict[str, Trial]]]) -> str:
     stages: list[str] = []
     for trials in results.values():
@@ -393,6 +435,10 @@ def main(argv: Sequence[str] | None = None) -> None:
             )
     print(f"## Accuracy ({args.seeds} seeds per case, rate scale {args.rate})\n")
     print(accuracy_table(results, args.methods))
+    for method, baseline in PAIRS:
+        if method in args.methods and baseline in args.methods:
+            print(f"\n## {method} against {baseline}, trial by trial\n")
+            print(paired_table(results, method, baseline))
     print("\n## Stage times of the proposed method (mean seconds per trial)\n")
     print(stage_table(results))
     curves = convergence(results, args.methods)
