@@ -199,7 +199,7 @@ def prepare(
             floor = fit_floor(cloud, lidar_up, config.segmentation)
             seconds["floor"] += time.perf_counter() - started
             if run_stage_1 and floor is not None:
-                kept = denoise_above_floor(cloud, floor[0], config)
+                kept = denoise_above_floor(cloud, floor[0], config, lidar.frame)
                 seconds["denoise"] += kept.seconds
                 counts["judged"] += kept.judged_points
                 counts["removed"] += kept.removed_points
@@ -240,12 +240,16 @@ def stage_1_filters(lidar: LidarInfo, config: DenoiseConfig) -> bool:
     return config.enabled and pattern is ScanPattern.NON_REPETITIVE
 
 
-def denoise_above_floor(cloud: Points, floor: Plane, config: PipelineConfig) -> DenoiseResult:
-    """Stage 1 as the pipeline runs it on one stop cloud (N, 3) in its LiDAR's frame: only the
-    points standing above `floor` (object candidates) are judged, against all their neighbours."""
+def denoise_above_floor(
+    cloud: Points, floor: Plane, config: PipelineConfig, frame: str | None = None
+) -> DenoiseResult:
+    """Stage 1 as the pipeline runs it on one stop cloud (N, 3) in the LiDAR frame `frame`: only
+    the points standing above `floor` (object candidates) are judged, against all their
+    neighbours. The frame picks its optical axis (`denoise.optical_axes`)."""
     judge = above_floor(cloud, floor, config.segmentation)
     plane = np.array([*floor.normal, floor.offset], dtype=np.float64)  # a x + b y + c z + d = 0
-    return denoise(cloud, config.denoise, floor_plane=plane, judge=judge)
+    axis = config.denoise.optical_axes.get(frame or "", config.denoise.optical_axis)
+    return denoise(cloud, config.denoise, axis, floor_plane=plane, judge=judge)
 
 
 def _denoise_message(prepared: Prepared, config: DenoiseConfig) -> str:

@@ -106,6 +106,15 @@ class DenoiseConfig(BaseModel):
     seed: int = Field(
         default=0, description="seed of the floor RANSAC and of the sample (results reproducible)"
     )
+    optical_axis: tuple[float, float, float] = Field(
+        default=(1.0, 0.0, 0.0),
+        description="the centre of the LiDAR model's scan pattern in its own frame (Livox Mid-70: "
+        "+x), for the observation centre of `proposed` and `floored`",
+    )
+    optical_axes: dict[str, tuple[float, float, float]] = Field(
+        default_factory=dict,
+        description="per LiDAR frame, where its model's optical axis differs from optical_axis",
+    )
     scan_patterns: dict[str, ScanPattern] = Field(
         default_factory=dict,
         description="the pipeline filters only non-repetitive LiDARs' clouds; this maps a LiDAR "
@@ -139,23 +148,26 @@ class DenoiseResult:
 def denoise(
     points: ArrayLike,
     config: DenoiseConfig | None = None,
-    optical_axis: Sequence[float] | ArrayLike = (1.0, 0.0, 0.0),
+    optical_axis: Sequence[float] | ArrayLike | None = None,
     floor_plane: ArrayLike | None = None,
     judge: ArrayLike | None = None,
 ) -> DenoiseResult:
-    """Stage 1 on one LiDAR's accumulated cloud of one stop. The pipeline calls
+    """Stage 1 on one LiDAR's accumulated cloud of one stop:
 
-        result = denoise(stop.clouds[frame], config.denoise, optical_axis=lidar_optical_axis)
+        result = denoise(stop.clouds[frame], config.denoise)
         cloud = stop.clouds[frame][result.keep]
 
+    (the pipeline runs it through `calibrate.denoise_above_floor`, judging what stands above the
+    floor).
+
     `points`: (N, 3) in the LiDAR frame (sensor at the origin). `optical_axis`: (3,) direction of
-    the scan pattern's centre in that frame (Livox Mid-70: +x); only `proposed` and `floored`
-    use it. `floor_plane`: optional (4,) `[a, b, c, d]`, `a x + b y + c z + d = 0` in the LiDAR
-    frame, for the observation centre; fitted here when omitted. `judge`: optional (N,) bool, the
-    points to judge (the others are kept): their neighbours are still searched among all points,
-    and the cloud-wide statistics come from `population_points` random points of the whole
-    cloud. The pipeline judges only what stands above the floor, where the objects are: a tenth
-    of a full-rate cloud, a tenth of the time.
+    the scan pattern's centre in that frame (default: `config.optical_axis`, Livox Mid-70: +x);
+    only `proposed` and `floored` use it. `floor_plane`: optional (4,) `[a, b, c, d]`,
+    `a x + b y + c z + d = 0` in the LiDAR frame, for the observation centre; fitted here when
+    omitted. `judge`: optional (N,) bool, the points to judge (the others are kept): their
+    neighbours are still searched among all points, and the cloud-wide statistics come from
+    `population_points` random points of the whole cloud. The pipeline judges only what stands
+    above the floor, where the objects are: a tenth of a full-rate cloud, a tenth of the time.
 
     Defined results rather than errors: a cloud of at most `k` points is kept whole (there are
     not `k` neighbours to judge density by) and `note` says so; duplicated points and a cloud
@@ -206,7 +218,7 @@ def denoise(
     else:
         centre = observation_centre(
             cloud,
-            optical_axis,
+            cfg.optical_axis if optical_axis is None else optical_axis,
             floor_plane,
             floor_distance_m=cfg.floor_distance_m,
             floor_iterations=cfg.floor_iterations,

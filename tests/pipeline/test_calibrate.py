@@ -4,17 +4,19 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.calibrate import STAGES, calibrate, prepare
+from pipeline.calibrate import STAGES, calibrate, denoise_above_floor, prepare
 from pipeline.config import PipelineConfig
 from pipeline.denoise import DenoiseConfig
 from pipeline.errors import BadInputError
 from pipeline.problem import ScanPattern
+from pipeline.segmentation import Plane
 from pipeline.transforms import invert, pose_difference
 from tests.pipeline.calibration_data import (
     box_calibration,
     box_problem,
     floor_only_calibration,
 )
+from tests.pipeline.denoise.clouds import AXIS_ON_FLOOR, FLOOR_PLANE, floor_in_lidar_frame
 
 
 def test_calibration_recovers_the_extrinsics_and_passes() -> None:
@@ -120,3 +122,19 @@ def test_stage_1_judges_only_what_stands_above_the_floor() -> None:
     # The objects and what trails behind them: a small share of every cloud, of which a few
     # per cent are bleeding points.
     assert 0 < removed < judged < 0.3 * int(denoise["input_points"])
+
+
+def test_stage_1_takes_each_lidars_optical_axis_from_the_config() -> None:
+    cloud = floor_in_lidar_frame(5000)
+    floor = Plane(normal=FLOOR_PLANE[:3], offset=float(FLOOR_PLANE[3]))
+    config = PipelineConfig.model_validate(
+        {"denoise": {"method": "proposed", "optical_axes": {"lidar_side": (1.0, 0.2, 0.0)}}}
+    )
+    default = denoise_above_floor(cloud, floor, config, "lidar_front").observation_centre
+    side = denoise_above_floor(cloud, floor, config, "lidar_side").observation_centre
+    assert default is not None and side is not None
+    np.testing.assert_allclose(default, AXIS_ON_FLOOR, atol=1e-9)
+    # On the floor, along the configured axis.
+    assert abs(FLOOR_PLANE[:3] @ side + FLOOR_PLANE[3]) < 1e-9
+    axis = np.array([1.0, 0.2, 0.0])
+    np.testing.assert_allclose(side / np.linalg.norm(side), axis / np.linalg.norm(axis))
