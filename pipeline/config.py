@@ -54,7 +54,9 @@ class PipelineConfig(BaseModel):
     """The pipeline judges only the points standing above each cloud's floor (`prepare`) of the
     LiDARs with non-repetitive scans (`stage_1_filters`), with a density ratio stricter than the
     filter's own (2.5, not 1.8: with 1.8 it also removes surface points seen at grazing incidence,
-    2-4 mm worse on cylinders)."""
+    2-4 mm worse on cylinders). Calibration benchmark, full rate, 10 seeds per case, on - off over
+    the 130 Mid-70 LiDAR-trials: -0.09 mm on average, no case worse by more than its standard
+    error; 1.5 s of a full-rate set-1 recording's 4.2 s."""
     segmentation: SegmentationConfig = SegmentationConfig()
     rough_refinement: RoughRefinementConfig = RoughRefinementConfig()
     optimisation: OptimisationConfig = OptimisationConfig()
