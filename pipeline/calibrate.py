@@ -234,8 +234,9 @@ def stage_1_filters(lidar: LidarInfo, config: DenoiseConfig) -> bool:
     lines degrees apart: its surfaces look like that too. Filtered, the spinning scenario's clouds
     lost 5,600 clean points above the floor for 3,600 mixed returns (seed 10) and calibrated
     6.0 mm off against 2.0 mm unfiltered (10 seeds); even removing exactly the labelled mixed
-    returns gave 2.8 mm on 5 seeds against 2.0 mm, since stage 2 already drops the points whose
-    surface its beam meets edge-on. `config.scan_patterns` overrides the recording's pattern."""
+    returns gave 2.5 mm (bench_calibration's `labelled_stage1`), stage 2 already dropping the
+    points whose surface the beam meets edge-on. `config.scan_patterns` overrides the recording's
+    pattern."""
     pattern = config.scan_patterns.get(lidar.frame, lidar.scan_pattern)
     return config.enabled and pattern is ScanPattern.NON_REPETITIVE
 

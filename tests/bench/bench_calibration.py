@@ -11,6 +11,8 @@ by each method; the error of each non-reference LiDAR relative to the reference 
 rotation deg) is compared with the synthesiser's truth. Methods: `proposed` (the pipeline as
 configured by default), `point_to_point` (the same with the paper's point-to-point residual),
 `with_stage1` / `without_stage1` (the same with the noise filter switched on / off),
+`labelled_stage1` (stage 1 off, the synthesiser's labelled bleeding points removed instead: the
+best any noise filter could do),
 `without_rr` (no rough refinement, no floor terms), `entire_cloud` (the same optimiser on every
 point, no segmentation). `initial` is the error before calibration.
 
@@ -29,6 +31,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -40,6 +43,9 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
+
+from pipeline.problem import CalibrationProblem  # noqa: E402
+from pipeline.synth.truth import Truth  # noqa: E402
 
 CASES = (
     "set1-box",
@@ -56,6 +62,7 @@ METHODS = (
     "point_to_point",
     "with_stage1",
     "without_stage1",
+    "labelled_stage1",
     "without_rr",
     "entire_cloud",
 )
@@ -98,6 +105,21 @@ def _history(
     return translation, rotation
 
 
+def without_bleeding(problem: CalibrationProblem, truth: Truth) -> CalibrationProblem:
+    """`problem` with the points the synthesiser labelled as bleeding removed from every cloud."""
+    stops = tuple(
+        dataclasses.replace(
+            stop,
+            clouds={
+                frame: cloud[~truth.stop_labels(stop.index, frame).is_bleeding]
+                for frame, cloud in stop.clouds.items()
+            },
+        )
+        for stop in problem.stops
+    )
+    return dataclasses.replace(problem, stops=stops)
+
+
 def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict[str, Trial]:
     from pipeline.baselines import entire_cloud, without_rough_refinement
     from pipeline.calibrate import calibrate, order_lidars
@@ -136,6 +158,10 @@ def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict
                 data = resolved(config)
                 data["denoise"]["enabled"] = method == "with_stage1"
                 result = calibrate(problem, config_from_mapping(data))
+            elif method == "labelled_stage1":
+                data = resolved(config)
+                data["denoise"]["enabled"] = False
+                result = calibrate(without_bleeding(problem, truth), config_from_mapping(data))
             elif method == "without_rr":
                 result = without_rough_refinement(problem, config)
             else:
@@ -195,7 +221,11 @@ def accuracy_table(results: dict[str, list[dict[str, Trial]]], methods: Sequence
     return "\n".join(lines)
 
 
-PAIRS = (("with_stage1", "without_stage1"), ("proposed", "point_to_point"))
+PAIRS = (
+    ("with_stage1", "without_stage1"),
+    ("labelled_stage1", "without_stage1"),
+    ("proposed", "point_to_point"),
+)
 """Methods compared trial by trial when both ran: (candidate, baseline)."""
 
 
