@@ -24,13 +24,27 @@ DOF_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
 
 class ObservabilityConfig(BaseModel):
     """A weak prior (what "we know nothing" means) makes the covariance finite; a DoF whose
-    posterior stddev stays above `undetermined_fraction` of the prior was not fixed by the data."""
+    posterior stddev stays above `undetermined_fraction` of the prior was not fixed by the data.
+
+    The formal covariance treats every residual as independent. They are not: neighbouring object
+    points share their local surface fit and its small bias, which the optimiser cannot average
+    away, so the true error is several times the formal 1-sigma. The reported stddev are the
+    formal ones times `stddev_scale_*`, measured on the calibration benchmark (full rate, 8 cases x
+    10 seeds, 140 LiDAR-trials): the RMS of |true error| / |formal 1-sigma| was 6.9 for
+    translation (4.8-7.9 per case) and 3.1 for rotation (2.4-4.0). `bench_calibration` prints the
+    ratio for the reported stddev (about 1 when these factors fit)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     prior_translation_m: float = Field(default=1.0, gt=0)
     prior_rotation_deg: float = Field(default=30.0, gt=0)
     undetermined_fraction: float = Field(default=0.5, gt=0, lt=1)
+    stddev_scale_translation: float = Field(
+        default=7.0, ge=1.0, description="reported translation stddev over the formal one"
+    )
+    stddev_scale_rotation: float = Field(
+        default=3.0, ge=1.0, description="reported rotation stddev over the formal one"
+    )
 
 
 @dataclass(frozen=True)
@@ -70,7 +84,8 @@ def pose_uncertainties(
     The data's information is rescaled by the a-posteriori `variance_factor`, the weak prior is
     added, and each LiDAR's 6x6 block of the inverse is turned from the optimiser's twist (in the
     reference frame) into the level-base axes through the LiDAR's origin. `up_ref` (3,): the floor
-    normal in the reference LiDAR's frame (None: use the base frame's axes as they are).
+    normal in the reference LiDAR's frame (None: use the base frame's axes as they are). The
+    undetermined DoF are judged on the formal stddev, which are then scaled (see the config).
     """
     prior = np.tile(
         [1.0 / config.prior_translation_m**2] * 3
@@ -100,5 +115,11 @@ def pose_uncertainties(
         undetermined = tuple(
             name for name, s, lim in zip(DOF_NAMES, stddev, limits, strict=True) if s > lim
         )
-        results.append(PoseUncertainty(stddev[:3], np.degrees(stddev[3:]), undetermined))
+        results.append(
+            PoseUncertainty(
+                stddev[:3] * config.stddev_scale_translation,
+                np.degrees(stddev[3:]) * config.stddev_scale_rotation,
+                undetermined,
+            )
+        )
     return tuple(results)

@@ -81,6 +81,9 @@ class Trial:
     history_translation: list[float] = field(default_factory=list)
     history_rotation: list[float] = field(default_factory=list)
     stages: dict[str, float] = field(default_factory=dict)
+    stddev_translation: list[float] = field(default_factory=list)
+    """Per non-reference LiDAR: the norm of the reported 1-sigma (m, deg), when reported."""
+    stddev_rotation: list[float] = field(default_factory=list)
 
 
 def _errors(
@@ -147,6 +150,8 @@ def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict
             optimisation = baseline.optimisation
             passed = None
             stages: dict[str, float] = {}
+            sigma_t: list[float] = []
+            sigma_r: list[float] = []
         else:
             if method == "proposed":
                 result = calibrate(problem, config)
@@ -173,6 +178,12 @@ def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict
             optimisation = result.optimisation
             passed = result.passed
             stages = {name: report.seconds for name, report in result.stages.items()}
+            sigma_t = [
+                float(np.linalg.norm(x.uncertainty.stddev_translation_m)) for x in result.lidars[1:]
+            ]
+            sigma_r = [
+                float(np.linalg.norm(x.uncertainty.stddev_rotation_deg)) for x in result.lidars[1:]
+            ]
         seconds = time.perf_counter() - started
         t, r = _errors(estimate, T_true)
         history_t, history_r = _history(optimisation.T_ref_lidar_per_iteration, T_true)
@@ -186,6 +197,8 @@ def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict
             history_t,
             history_r,
             stages,
+            sigma_t,
+            sigma_r,
         )
     return trials
 
@@ -264,6 +277,31 @@ def paired_table(results: dict[str, list[dict[str, Trial]]], method: str, baseli
             f"| {dr.mean():+.4f} ({sem(dr):.4f}) | {int((dt > 0.5).sum())} "
             f"| {int((dr > 0.01).sum())} |"
         )
+    return "\n".join(lines)
+
+
+def stddev_table(results: dict[str, list[dict[str, Trial]]], methods: Sequence[str]) -> str:
+    """The reported 1-sigma against the true error: for a calibrated Gaussian, |error| / |sigma|
+    (norms over the three axes) has an RMS of 1; above 1, the reported stddev is optimistic."""
+    lines = [
+        "| case | method | median reported sigma: mm / deg | RMS error/sigma: translation "
+        "| rotation | max error/sigma: translation | rotation |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for case, trials in results.items():
+        for method in methods:
+            runs = [t[method] for t in trials if method in t and t[method].stddev_translation]
+            if not runs:
+                continue
+            sigma_t = np.concatenate([run.stddev_translation for run in runs])
+            sigma_r = np.concatenate([run.stddev_rotation for run in runs])
+            ratio_t = np.concatenate([run.translation for run in runs]) / np.maximum(sigma_t, 1e-12)
+            ratio_r = np.concatenate([run.rotation for run in runs]) / np.maximum(sigma_r, 1e-12)
+            lines.append(
+                f"| {case} | {method} | {1000 * np.median(sigma_t):.2f} / {np.median(sigma_r):.4f} "
+                f"| {np.sqrt(np.mean(ratio_t**2)):.1f} | {np.sqrt(np.mean(ratio_r**2)):.1f} "
+                f"| {ratio_t.max():.1f} | {ratio_r.max():.1f} |"
+            )
     return "\n".join(lines)
 
 
@@ -469,6 +507,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         if method in args.methods and baseline in args.methods:
             print(f"\n## {method} against {baseline}, trial by trial\n")
             print(paired_table(results, method, baseline))
+    print("\n## Reported 1-sigma against the true error\n")
+    print(stddev_table(results, args.methods))
     print("\n## Stage times of the proposed method (mean seconds per trial)\n")
     print(stage_table(results))
     curves = convergence(results, args.methods)

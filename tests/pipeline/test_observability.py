@@ -1,7 +1,9 @@
 import numpy as np
 
-from pipeline.observability import level_rotation
-from tests.pipeline.calibration_data import box_calibration, floor_only_calibration
+from pipeline.calibrate import calibrate
+from pipeline.config import PipelineConfig
+from pipeline.observability import ObservabilityConfig, level_rotation
+from tests.pipeline.calibration_data import box_calibration, box_problem, floor_only_calibration
 
 
 def test_level_rotation_turns_the_floor_normal_to_z_by_the_shortest_way() -> None:
@@ -30,3 +32,20 @@ def test_a_bare_floor_leaves_x_y_and_yaw_undetermined_and_only_those() -> None:
     # The floor still fixes height, roll and pitch.
     assert other.uncertainty.stddev_translation_m[2] < 0.01
     assert max(other.uncertainty.stddev_rotation_deg[:2]) < 0.1
+
+
+def test_reported_stddev_are_the_formal_ones_scaled_and_the_undetermined_judged_before() -> None:
+    problem, _ = box_problem()
+    formal = ObservabilityConfig(stddev_scale_translation=1.0, stddev_scale_rotation=1.0)
+    scaled = ObservabilityConfig(stddev_scale_translation=7.0, stddev_scale_rotation=3.0)
+    results = [
+        calibrate(problem, PipelineConfig(observability=config)) for config in (formal, scaled)
+    ]
+    for plain, wide in zip(results[0].lidars, results[1].lidars, strict=True):
+        np.testing.assert_allclose(
+            wide.uncertainty.stddev_translation_m, 7.0 * plain.uncertainty.stddev_translation_m
+        )
+        np.testing.assert_allclose(
+            wide.uncertainty.stddev_rotation_deg, 3.0 * plain.uncertainty.stddev_rotation_deg
+        )
+        assert wide.uncertainty.undetermined == plain.uncertainty.undetermined
