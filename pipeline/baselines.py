@@ -59,8 +59,13 @@ def entire_cloud(
     prepared = prepare(problem, config)
     neighbours = config.segmentation.surface_neighbours
     surfaces = [
-        [local_planes(voxel_downsample(cloud, voxel_size_m), neighbours) for cloud in row]
-        for row in prepared.clouds
+        [
+            local_planes(
+                voxel_downsample(prepared.filtered(lidar, stop)[0], voxel_size_m), neighbours
+            )
+            for stop in range(len(row))
+        ]
+        for lidar, row in enumerate(prepared.clouds)
     ]
     optimisation = config.optimisation.model_copy(
         update={"floor_terms": False, "max_points_per_cloud": max_points_per_cloud}

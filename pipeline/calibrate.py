@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.config import FramesConfig, PipelineConfig, config_hash
-from pipeline.denoise import DenoiseConfig, DenoiseResult, denoise
+from pipeline.denoise import DenoiseConfig, DenoiseResult, KeepMask, denoise
 from pipeline.errors import BadInputError
 from pipeline.metric import metric_error
 from pipeline.observability import PoseUncertainty, level_rotation, pose_uncertainties
@@ -123,12 +123,14 @@ class CalibrationResult:
 @dataclass(frozen=True)
 class Prepared:
     """The problem in the calibration's own terms: LiDARs reference first, clouds per LiDAR and
-    stop (after stage 1) with their floors (fitted before stage 1; inlier masks over the kept
-    points), initial `T_G_ref` (J, 4, 4) and `T_ref_lidar` (L, 4, 4), and the expected floor
-    normal ("up") in each LiDAR's frame from the initial extrinsics."""
+    stop as recorded with their floors (fitted before stage 1) and stage 1's keep masks (None:
+    all kept), initial `T_G_ref` (J, 4, 4) and `T_ref_lidar` (L, 4, 4), and the expected floor
+    normal ("up") in each LiDAR's frame from the initial extrinsics. `filtered` gives a cloud as
+    stage 2 sees it."""
 
     lidars: tuple[LidarInfo, ...]
     clouds: tuple[tuple[Points, ...], ...]
+    kept: tuple[tuple[KeepMask | None, ...], ...]
     T_G_ref: NDArray[np.float64]
     T_ref_lidar: NDArray[np.float64]
     up: tuple[NDArray[np.float64], ...]
@@ -139,6 +141,16 @@ class Prepared:
     filtered_frames: tuple[str, ...]
     denoise_seconds: float
     floor_seconds: float
+
+    def filtered(self, lidar: int, stop: int) -> tuple[Points, FloorFit | None]:
+        """LiDAR `lidar`'s cloud at stop `stop` without what stage 1 removed, and its floor
+        (inlier mask over those points). Copied here, one at a time: a full-rate recording's
+        filtered clouds all at once would be hundreds of MB."""
+        cloud, floor = self.clouds[lidar][stop], self.floors[lidar][stop]
+        keep = self.kept[lidar][stop]
+        if keep is None:
+            return cloud, floor
+        return cloud[keep], None if floor is None else (floor[0], floor[1][keep], floor[2])
 
 
 def order_lidars(problem: CalibrationProblem, frames: FramesConfig) -> tuple[LidarInfo, ...]:
@@ -183,14 +195,14 @@ def prepare(
     T_ref_lidar = np.stack([T_ref_base @ lidar.T_base_lidar for lidar in lidars])
     T_ref_lidar[0] = np.eye(4)
     up = tuple(lidar.T_base_lidar[:3, :3].T @ np.array([0.0, 0.0, 1.0]) for lidar in lidars)
-    clouds, floors = [], []
+    clouds, floors, kept_masks = [], [], []
     counts = {"input": 0, "removed": 0, "judged": 0}
     seconds = {"floor": 0.0, "denoise": 0.0}
     filtered = tuple(
         lidar.frame for lidar in lidars if denoised and stage_1_filters(lidar, config.denoise)
     )
     for lidar, lidar_up in zip(lidars, up, strict=True):
-        row, row_floors = [], []
+        row, row_floors, row_kept = [], [], []
         run_stage_1 = lidar.frame in filtered
         for stop in problem.stops:
             cloud = np.asarray(stop.clouds.get(lidar.frame, np.zeros((0, 3))), dtype=np.float64)
@@ -198,20 +210,23 @@ def prepare(
             started = time.perf_counter()
             floor = fit_floor(cloud, lidar_up, config.segmentation)
             seconds["floor"] += time.perf_counter() - started
+            keep = None
             if run_stage_1 and floor is not None:
                 kept = denoise_above_floor(cloud, floor[0], config, lidar.frame)
                 seconds["denoise"] += kept.seconds
                 counts["judged"] += kept.judged_points
                 counts["removed"] += kept.removed_points
-                cloud = cloud[kept.keep]
-                floor = (floor[0], floor[1][kept.keep], floor[2])
+                keep = kept.keep if kept.removed_points else None
             row.append(cloud)
             row_floors.append(floor)
+            row_kept.append(keep)
         clouds.append(tuple(row))
         floors.append(tuple(row_floors))
+        kept_masks.append(tuple(row_kept))
     return Prepared(
         lidars,
         tuple(clouds),
+        tuple(kept_masks),
         T_G_ref,
         T_ref_lidar,
         up,
@@ -266,12 +281,13 @@ def _denoise_message(prepared: Prepared, config: DenoiseConfig) -> str:
 
 
 def segment_all(prepared: Prepared, config: PipelineConfig) -> tuple[tuple[Segmentation, ...], ...]:
+    def segmented(lidar: int, stop: int) -> Segmentation:
+        cloud, floor = prepared.filtered(lidar, stop)
+        return segment(cloud, prepared.up[lidar], config.segmentation, floor)
+
     return tuple(
-        tuple(
-            segment(cloud, up, config.segmentation, floor)
-            for cloud, floor in zip(row, row_floors, strict=True)
-        )
-        for row, row_floors, up in zip(prepared.clouds, prepared.floors, prepared.up, strict=True)
+        tuple(segmented(lidar, stop) for stop in range(len(row)))
+        for lidar, row in enumerate(prepared.clouds)
     )
 
 

@@ -85,6 +85,20 @@ def test_stage_1_filters_every_non_repetitive_lidar_by_default() -> None:
     assert int(denoise["judged_points"]) > 0
 
 
+def test_stage_1_keeps_masks_and_copies_a_filtered_cloud_only_when_asked() -> None:
+    problem, _ = box_problem()
+    prepared = prepare(problem, PipelineConfig(denoise=DenoiseConfig(density_ratio=1.8)))
+    stop = problem.stops[0]
+    assert prepared.clouds[0][0] is stop.clouds["lidar_front"]  # no copy of the recording
+    keep = prepared.kept[0][0]
+    assert keep is not None and 0 < np.count_nonzero(~keep) < 0.1 * len(keep)
+    cloud, floor = prepared.filtered(0, 0)
+    np.testing.assert_array_equal(cloud, stop.clouds["lidar_front"][keep])
+    recorded_floor = prepared.floors[0][0]
+    assert floor is not None and recorded_floor is not None and floor[1].shape == (len(cloud),)
+    assert np.count_nonzero(floor[1]) == np.count_nonzero(recorded_floor[1])
+
+
 def test_stage_1_leaves_repetitive_scans_alone() -> None:
     problem, _ = box_problem()
     spinning_rear = dataclasses.replace(
@@ -98,8 +112,7 @@ def test_stage_1_leaves_repetitive_scans_alone() -> None:
     )
     prepared = prepare(spinning_rear, PipelineConfig())
     assert prepared.filtered_frames == ("lidar_front",)
-    rear = [cloud for cloud in prepared.clouds[1]]
-    assert [len(c) for c in rear] == [len(stop.clouds["lidar_rear"]) for stop in problem.stops]
+    assert prepared.kept[1] == (None,) * len(problem.stops)
     # The config overrides what the recording says, either way.
     told = PipelineConfig.model_validate(
         {
