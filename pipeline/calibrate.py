@@ -271,13 +271,14 @@ def denoise_above_floor(
 def _denoise_message(prepared: Prepared, config: DenoiseConfig) -> str:
     if not config.enabled:
         return "disabled"
+    unfiltered = [f.frame for f in prepared.lidars if f.frame not in prepared.filtered_frames]
+    left_alone = f"{', '.join(unfiltered)} not filtered (repetitive scans)"
+    if not prepared.filtered_frames:
+        return left_alone
     message = (
         f"removed {prepared.removed_points} of the {prepared.judged_points} points above the floor"
     )
-    unfiltered = [f.frame for f in prepared.lidars if f.frame not in prepared.filtered_frames]
-    if unfiltered:
-        message += f"; {', '.join(unfiltered)} not filtered (repetitive scans)"
-    return message
+    return f"{message}; {left_alone}" if unfiltered else message
 
 
 def segment_all(prepared: Prepared, config: PipelineConfig) -> tuple[tuple[Segmentation, ...], ...]:

@@ -126,6 +126,21 @@ def test_stage_1_leaves_repetitive_scans_alone() -> None:
     assert prepare(problem, off).filtered_frames == ()
 
 
+def test_progress_names_the_lidars_stage_1_left_alone() -> None:
+    problem, _ = box_problem()
+    spinning = dataclasses.replace(
+        problem,
+        lidars=tuple(
+            dataclasses.replace(lidar, scan_pattern=ScanPattern.REPETITIVE)
+            for lidar in problem.lidars
+        ),
+    )
+    said: dict[str, str] = {}
+    result = calibrate(spinning, progress=lambda stage, _, message: said.setdefault(stage, message))
+    assert said["denoise"] == "lidar_front, lidar_rear not filtered (repetitive scans)"
+    assert result.stages["denoise"].details["filtered_frames"] == ""
+
+
 def test_stage_1_judges_only_what_stands_above_the_floor() -> None:
     config = PipelineConfig(denoise=DenoiseConfig(density_ratio=1.8))
     result = calibrate(box_problem()[0], config)
