@@ -8,7 +8,7 @@ from pipeline.calibrate import STAGES, calibrate, denoise_above_floor, prepare
 from pipeline.config import PipelineConfig
 from pipeline.denoise import DenoiseConfig
 from pipeline.errors import BadInputError
-from pipeline.problem import ScanPattern
+from pipeline.problem import CalibrationProblem, ScanPattern
 from pipeline.segmentation import Plane
 from pipeline.transforms import invert, pose_difference
 from tests.pipeline.calibration_data import (
@@ -99,17 +99,22 @@ def test_stage_1_keeps_masks_and_copies_a_filtered_cloud_only_when_asked() -> No
     assert np.count_nonzero(floor[1]) == np.count_nonzero(recorded_floor[1])
 
 
-def test_stage_1_leaves_repetitive_scans_alone() -> None:
-    problem, _ = box_problem()
-    spinning_rear = dataclasses.replace(
+def spinning(problem: CalibrationProblem, *frames: str) -> CalibrationProblem:
+    """`problem` with the LiDARs `frames` (all when none given) tagged as spinning ones."""
+    return dataclasses.replace(
         problem,
         lidars=tuple(
             dataclasses.replace(lidar, scan_pattern=ScanPattern.REPETITIVE)
-            if lidar.frame == "lidar_rear"
+            if not frames or lidar.frame in frames
             else lidar
             for lidar in problem.lidars
         ),
     )
+
+
+def test_stage_1_leaves_repetitive_scans_alone() -> None:
+    problem, _ = box_problem()
+    spinning_rear = spinning(problem, "lidar_rear")
     prepared = prepare(spinning_rear, PipelineConfig())
     assert prepared.filtered_frames == ("lidar_front",)
     assert prepared.kept[1] == (None,) * len(problem.stops)
@@ -127,16 +132,12 @@ def test_stage_1_leaves_repetitive_scans_alone() -> None:
 
 
 def test_progress_names_the_lidars_stage_1_left_alone() -> None:
-    problem, _ = box_problem()
-    spinning = dataclasses.replace(
-        problem,
-        lidars=tuple(
-            dataclasses.replace(lidar, scan_pattern=ScanPattern.REPETITIVE)
-            for lidar in problem.lidars
-        ),
-    )
     said: dict[str, str] = {}
-    result = calibrate(spinning, progress=lambda stage, _, message: said.setdefault(stage, message))
+
+    def progress(stage: str, seconds: float, message: str) -> None:
+        said[stage] = message
+
+    result = calibrate(spinning(box_problem()[0]), progress=progress)
     assert said["denoise"] == "lidar_front, lidar_rear not filtered (repetitive scans)"
     assert result.stages["denoise"].details["filtered_frames"] == ""
 
