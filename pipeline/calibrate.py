@@ -198,12 +198,12 @@ def prepare(
     clouds, floors, kept_masks = [], [], []
     counts = {"input": 0, "removed": 0, "judged": 0}
     seconds = {"floor": 0.0, "denoise": 0.0}
-    filtered = tuple(
+    filtered_frames = tuple(
         lidar.frame for lidar in lidars if denoised and stage_1_filters(lidar, config.denoise)
     )
     for lidar, lidar_up in zip(lidars, up, strict=True):
         row, row_floors, row_kept = [], [], []
-        run_stage_1 = lidar.frame in filtered
+        run_stage_1 = lidar.frame in filtered_frames
         for stop in problem.stops:
             cloud = np.asarray(stop.clouds.get(lidar.frame, np.zeros((0, 3))), dtype=np.float64)
             counts["input"] += len(cloud)
@@ -234,7 +234,7 @@ def prepare(
         counts["input"],
         counts["removed"],
         counts["judged"],
-        filtered,
+        filtered_frames,
         seconds["denoise"],
         seconds["floor"],
     )
