@@ -12,9 +12,9 @@ from pydantic import BaseModel, Field
 
 from service import repository
 from service.deps import ReadKey, SessionDep
-from service.pagination import PAGE_SIZE_DEFAULT, PAGE_SIZE_MAX, decode_cursor, encode_cursor
+from service.pagination import PAGE_SIZE_DEFAULT, PAGE_SIZE_MAX
 from service.problems import PROBLEM_RESPONSES
-from service.routes.robots import robot_public
+from service.routes.robots import robot_public, robots_page
 from service.routes.runs import run_summary
 from service.schemas import RobotPublic, RunSummary
 
@@ -46,10 +46,9 @@ def get_fleet(
     limit: Annotated[int, Query(ge=1, le=PAGE_SIZE_MAX)] = PAGE_SIZE_DEFAULT,
     cursor: Annotated[str | None, Query(max_length=512)] = None,
 ) -> FleetPage:
-    after = decode_cursor(cursor, "robots", 1)[0] if cursor is not None else None
-    robots = repository.list_robots(session, limit=limit + 1, after_id=after)
+    robots, next_cursor = robots_page(session, limit, cursor)
     items = []
-    for robot in robots[:limit]:
+    for robot in robots:
         latest = repository.latest_run(session, robot.id)
         accepted = repository.latest_calibration(session, robot.id)
         items.append(
@@ -67,5 +66,4 @@ def get_fleet(
                 else None,
             )
         )
-    next_cursor = encode_cursor("robots", robots[limit - 1].id) if len(robots) > limit else None
     return FleetPage(items=items, next_cursor=next_cursor)

@@ -52,10 +52,8 @@ def list_robots(
     limit: Annotated[int, Query(ge=1, le=PAGE_SIZE_MAX)] = PAGE_SIZE_DEFAULT,
     cursor: Annotated[str | None, Query(max_length=512)] = None,
 ) -> RobotPage:
-    after = decode_cursor(cursor, "robots", 1)[0] if cursor is not None else None
-    robots = repository.list_robots(session, limit=limit + 1, after_id=after)
-    next_cursor = encode_cursor("robots", robots[limit - 1].id) if len(robots) > limit else None
-    return RobotPage(items=[robot_public(r) for r in robots[:limit]], next_cursor=next_cursor)
+    robots, next_cursor = robots_page(session, limit, cursor)
+    return RobotPage(items=[robot_public(r) for r in robots], next_cursor=next_cursor)
 
 
 @router.get("/{robot_id}", summary="A robot, its tolerance profile and latest run")
@@ -160,6 +158,14 @@ def get_history(
         last = rows[limit - 1]
         next_cursor = encode_cursor("history", last.measured_at, last.id)
     return HistoryPage(robot_id=robot_id, items=items, next_cursor=next_cursor)
+
+
+def robots_page(session: Session, limit: int, cursor: str | None) -> tuple[list[Robot], str | None]:
+    """Up to `limit` robots by id after `cursor`, and the cursor of the next page (None: last)."""
+    after = decode_cursor(cursor, "robots", 1)[0] if cursor is not None else None
+    robots = repository.list_robots(session, limit=limit + 1, after_id=after)
+    next_cursor = encode_cursor("robots", robots[limit - 1].id) if len(robots) > limit else None
+    return robots[:limit], next_cursor
 
 
 def robot_public(robot: Robot) -> RobotPublic:
