@@ -23,7 +23,14 @@ from pipeline.observability import PoseUncertainty, level_rotation, pose_uncerta
 from pipeline.optimisation import OptimisationResult, optimise
 from pipeline.problem import CalibrationProblem, LidarInfo, ScanPattern
 from pipeline.rough_refinement import RoughRefinementResult, refine_with_floor
-from pipeline.segmentation import FloorFit, Plane, Segmentation, above_floor, fit_floor, segment
+from pipeline.segmentation import (
+    FloorFit,
+    Plane,
+    Segmentation,
+    above_floor,
+    fit_floor,
+    segment_on_floor,
+)
 from pipeline.transforms import Matrix4, Points, invert, make_transform, pose_difference
 from pipeline.verdict import LidarEvidence, Verdict, judge
 
@@ -284,7 +291,7 @@ def _denoise_message(prepared: Prepared, config: DenoiseConfig) -> str:
 def segment_all(prepared: Prepared, config: PipelineConfig) -> tuple[tuple[Segmentation, ...], ...]:
     def segmented(lidar: int, stop: int) -> Segmentation:
         cloud, floor = prepared.filtered(lidar, stop)
-        return segment(cloud, prepared.up[lidar], config.segmentation, floor)
+        return segment_on_floor(cloud, config.segmentation, floor)
 
     return tuple(
         tuple(segmented(lidar, stop) for stop in range(len(row)))

@@ -7,6 +7,7 @@ grouped by Euclidean clustering (radius graph, connected components); small clus
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from typing import Literal
@@ -267,25 +268,28 @@ def above_floor(points: Points, floor: Plane, config: SegmentationConfig) -> NDA
     return mask
 
 
-def segment(
-    points: Points,
-    up: NDArray[np.float64],
-    config: SegmentationConfig,
-    fitted: FloorFit | Literal["fit"] | None = "fit",
-) -> Segmentation:
+def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig) -> Segmentation:
     """Split (N, 3) points of one LiDAR at one stop into floor and objects, in the LiDAR frame.
 
-    `up` (3,) is the expected floor normal in the LiDAR frame (see `fit_floor`). `fitted`: the
-    cloud's floor when the caller has fitted it already (`fit_floor` on these points), None when
-    it found none; fitted here by default.
+    `up` (3,) is the expected floor normal in the LiDAR frame (see `fit_floor`). The floor is
+    fitted here; `segment_on_floor` takes one fitted already.
     """
+    started = time.perf_counter()
+    cloud = np.asarray(points, dtype=np.float64)
+    result = segment_on_floor(cloud, config, fit_floor(cloud, up, config))
+    return dataclasses.replace(result, seconds=time.perf_counter() - started)
+
+
+def segment_on_floor(
+    points: Points, config: SegmentationConfig, found: FloorFit | None
+) -> Segmentation:
+    """`segment` with the cloud's floor fitted beforehand (`fit_floor` on these points; None:
+    it found none, and then nothing can be told apart from the floor: no objects)."""
     started = time.perf_counter()
     cloud = np.asarray(points, dtype=np.float64)
     # Only the points above the floor are voxelised: the floor is ~90 % of a full-rate cloud and
     # voxelising it would cost more than everything else in this stage.
-    found = fit_floor(cloud, up, config) if isinstance(fitted, str) else fitted
     if found is None:
-        # Objects are what stands on the floor: without a floor nothing can be told apart from it.
         floor, floor_inliers, rms = None, 0, float("nan")
         candidates = cloud[:0]
     else:

@@ -6,6 +6,7 @@ from pipeline.segmentation import (
     find_floor,
     fit_floor,
     segment,
+    segment_on_floor,
 )
 from tests.pipeline.calibration_data import box_prepared, box_problem, floor_only_problem
 
@@ -85,8 +86,8 @@ def test_a_floor_fitted_beforehand_gives_the_same_segmentation() -> None:
     fitted = fit_floor(cloud, up, config)
     assert fitted is not None
 
-    given, own = segment(cloud, up, config, fitted), segment(cloud, up, config)
+    given, own = segment_on_floor(cloud, config, fitted), segment(cloud, up, config)
 
     np.testing.assert_array_equal(given.object_points, own.object_points)
     assert given.floor_inliers == own.floor_inliers
-    assert segment(cloud, up, config, None).object_points.shape == (0, 3)
+    assert segment_on_floor(cloud, config, None).object_points.shape == (0, 3)
