@@ -29,7 +29,8 @@ def make_transform(rotation: ArrayLike, translation: ArrayLike) -> Matrix4:
 def from_translation_xyzw(translation: Sequence[float] | ArrayLike, xyzw: ArrayLike) -> Matrix4:
     """Build `T` from a (3,) translation and a (4,) quaternion `[x, y, z, w]` (normalised here)."""
     quat = np.asarray(xyzw, dtype=np.float64)
-    norm = float(np.linalg.norm(quat))
+    with np.errstate(over="ignore"):  # a norm past float64's range is refused just below
+        norm = float(np.linalg.norm(quat))
     if not np.isfinite(norm) or norm < 1e-9:
         raise ValueError(
             f"quaternion {quat.tolist()} has no direction; "

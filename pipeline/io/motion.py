@@ -15,7 +15,12 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.io.errors import NoTrajectoryError
 from pipeline.io.source import OpenRecording, reading_errors, stamp_ns
-from pipeline.io.tf_tree import TransformTree, normalize_frame
+from pipeline.io.tf_tree import (
+    BadTransformError,
+    TransformTree,
+    damaged_tf_static,
+    normalize_frame,
+)
 from pipeline.io.trajectory import Trajectory, valid_samples
 from pipeline.io.typestores import ODOMETRY, TF_MESSAGE
 from pipeline.transforms import Matrix4
@@ -82,7 +87,10 @@ def read_motion(
         for connection, log_ns, raw in opened.messages([*static, *chosen]):
             msg: Any = opened.deserialize(raw, connection)
             if connection.topic == "/tf_static":
-                tree.add_message(msg)
+                try:
+                    tree.add_message(msg)
+                except BadTransformError as err:
+                    raise damaged_tf_static(opened.path, err) from err
             elif use_odometry:
                 key = (
                     normalize_frame(msg.header.frame_id),

@@ -32,7 +32,13 @@ from pipeline.io.errors import RecordingError
 from pipeline.io.formats import RecordingFormat
 from pipeline.io.motion import TF_TYPES
 from pipeline.io.source import OpenRecording, open_recording, reading_errors
-from pipeline.io.tf_tree import TransformTree, normalize_frame, transform_matrix
+from pipeline.io.tf_tree import (
+    BadTransformError,
+    TransformTree,
+    damaged_tf_static,
+    message_edges,
+    normalize_frame,
+)
 from pipeline.io.typestores import TF_MESSAGE, ros1_typestore, ros2_typestore
 from pipeline.transforms import Matrix4, to_translation_xyzw
 
@@ -171,14 +177,10 @@ def _read_static_edges(opened: OpenRecording, connections: list[Connection]) -> 
     with reading_errors(opened.path, opened.storage):
         for connection, _, raw in opened.messages(connections):
             msg: Any = opened.deserialize(raw, connection)
-            edges += [
-                StaticEdge(
-                    normalize_frame(stamped.header.frame_id),
-                    normalize_frame(stamped.child_frame_id),
-                    transform_matrix(stamped.transform),
-                )
-                for stamped in msg.transforms
-            ]
+            try:
+                edges += [StaticEdge(*edge) for edge in message_edges(msg)]
+            except BadTransformError as err:
+                raise damaged_tf_static(opened.path, err) from err
     return edges
 
 

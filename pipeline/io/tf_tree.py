@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.io.errors import CorruptRecordingError
 from pipeline.transforms import Matrix4, from_translation_xyzw, invert
 
 
@@ -14,10 +15,43 @@ def normalize_frame(name: str) -> str:
     return name.lstrip("/")
 
 
+class BadTransformError(ValueError):
+    """A `geometry_msgs/Transform` that is no transform (a damaged recording)."""
+
+
 def transform_matrix(transform: Any) -> Matrix4:
-    """`T_parent_child` (4, 4) from a `geometry_msgs/Transform`."""
+    """`T_parent_child` (4, 4) from a `geometry_msgs/Transform`; `BadTransformError` when it is
+    none (a NaN or infinite translation, a quaternion without direction)."""
     t, q = transform.translation, transform.rotation
-    return from_translation_xyzw((t.x, t.y, t.z), (q.x, q.y, q.z, q.w))
+    translation = np.array([t.x, t.y, t.z], dtype=np.float64)
+    try:
+        if not np.isfinite(translation).all():
+            raise ValueError(f"translation {translation.tolist()} is not finite")
+        return from_translation_xyzw(translation, (q.x, q.y, q.z, q.w))
+    except ValueError as err:
+        raise BadTransformError(str(err)) from err
+
+
+def message_edges(msg: Any) -> list[tuple[str, str, Matrix4]]:
+    """`(parent, child, T_parent_child)` of every transform of a `tf2_msgs/TFMessage`, frames
+    normalised; `BadTransformError` naming the first edge that holds no transform."""
+    edges = []
+    for stamped in msg.transforms:
+        parent = normalize_frame(stamped.header.frame_id)
+        child = normalize_frame(stamped.child_frame_id)
+        try:
+            edges.append((parent, child, transform_matrix(stamped.transform)))
+        except BadTransformError as err:
+            raise BadTransformError(f"the edge {parent} -> {child}: {err}") from err
+    return edges
+
+
+def damaged_tf_static(path: object, err: BadTransformError) -> CorruptRecordingError:
+    """The error to raise when `/tf_static` of the recording at `path` holds `err`."""
+    return CorruptRecordingError(
+        f"{path}: /tf_static is damaged ({err}); copy the recording again, or give the LiDARs' "
+        "extrinsics in the config"
+    )
 
 
 class TransformTree:
@@ -30,11 +64,9 @@ class TransformTree:
         self._parent[normalize_frame(child)] = (normalize_frame(parent), T_parent_child)
 
     def add_message(self, msg: Any) -> None:
-        """Every edge of a `tf2_msgs/TFMessage`."""
-        for stamped in msg.transforms:
-            self.add(
-                stamped.header.frame_id, stamped.child_frame_id, transform_matrix(stamped.transform)
-            )
+        """Every edge of a `tf2_msgs/TFMessage` (see `message_edges`)."""
+        for parent, child, T_parent_child in message_edges(msg):
+            self.add(parent, child, T_parent_child)
 
     @property
     def frames(self) -> frozenset[str]:

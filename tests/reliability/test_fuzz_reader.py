@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import shutil
 import sqlite3
+import struct
 import tarfile
 import zipfile
 from collections.abc import Callable
@@ -20,7 +21,7 @@ from pipeline.errors import PipelineError
 from pipeline.io import read_recording
 from pipeline.io.errors import CorruptRecordingError
 from pipeline.io.writer import WriterFormat
-from tests.pipeline.io.recordings import Spec, write_recording
+from tests.pipeline.io.recordings import T_BASE_MOUNT, Spec, write_recording
 
 # Small but complete: two LiDARs, odometry, tf_static and two stops, about 90 KB per format.
 SPEC = Spec(stops=2, points=40, dwell_s=1.2, move_s=0.5, odom_hz=20, scan_hz=5)
@@ -142,6 +143,18 @@ def _damage_ros1_time(data: bytes) -> bytes:
     return data[:at] + b"\x01\x02\x03\x04\x05\x06\x07\x08" + data[at + 8 :]
 
 
+def _damage_tf_static(value: float, offset: int) -> Callable[[bytes], bytes]:
+    """The float64 `offset` places after the start of the base_link -> rear_mount translation in
+    /tf_static (x, y, z, then the quaternion's x, y, z, w) set to `value`. The fuzzer found a
+    quaternion component of 2.7e154: its norm overflows, and the reader raised a bare ValueError."""
+
+    def damage(data: bytes) -> bytes:
+        at = data.index(struct.pack("<3d", *T_BASE_MOUNT[:3, 3])) + 8 * offset
+        return data[:at] + struct.pack("<d", value) + data[at + 8 :]
+
+    return damage
+
+
 def _null_sqlite_topic(path: Path) -> None:
     """A topic row whose name is NULL (the sort of connections by topic raised TypeError)."""
     connection = sqlite3.connect(path)
@@ -179,6 +192,30 @@ def test_damage_the_fuzzer_found_is_a_corrupt_recording(
     path.write_bytes(damage(originals[name]))
     with pytest.raises(CorruptRecordingError, match="truncated or damaged"):
         read_recording(path)
+
+
+@pytest.mark.parametrize("name", ["mcap", "bag"])
+@pytest.mark.parametrize(
+    ("damage", "says"),
+    [
+        (_damage_tf_static(2.6815624260044027e154, 3), "has no direction"),
+        (_damage_tf_static(float("nan"), 0), "is not finite"),
+    ],
+    ids=["quaternion-overflows", "translation-nan"],
+)
+def test_a_tf_static_edge_that_is_no_transform_is_a_corrupt_recording(
+    originals: dict[str, bytes],
+    name: str,
+    damage: Callable[[bytes], bytes],
+    says: str,
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / f"upload.{name}"
+    path.write_bytes(damage(originals[name]))
+    with pytest.raises(CorruptRecordingError) as raised:
+        read_recording(path)
+    message = str(raised.value)
+    assert str(path) in message and "base_link -> rear_mount" in message and says in message
 
 
 def test_a_sqlite3_topic_without_a_name_is_a_corrupt_recording(
