@@ -150,14 +150,17 @@ def _remedy(storage: RecordingFormat) -> str:
 
 
 def _raised_by_backend(err: BaseException) -> bool:
-    """Whether the innermost Python frame of `err` is in rosbags (or code it generated)."""
+    """Whether `err` was raised while rosbags ran: a frame of its traceback is in rosbags, or its
+    innermost frame is code rosbags generated. (Not only the innermost frame: rosbags' own error
+    messages can fail in the standard library, e.g. an unknown record type's enum lookup.)"""
     tb = err.__traceback__
-    while tb is not None and tb.tb_next is not None:
+    innermost = ""
+    while tb is not None:
+        innermost = tb.tb_frame.f_code.co_filename
+        if "rosbags" in Path(innermost).parts:
+            return True
         tb = tb.tb_next
-    if tb is None:
-        return False
-    filename = tb.tb_frame.f_code.co_filename
-    return "rosbags" in Path(filename).parts or not filename.endswith(".py")
+    return bool(innermost) and not innermost.endswith(".py")
 
 
 @contextmanager

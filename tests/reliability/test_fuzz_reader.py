@@ -143,6 +143,13 @@ def _damage_ros1_time(data: bytes) -> bytes:
     return data[:at] + b"\x01\x02\x03\x04\x05\x06\x07\x08" + data[at + 8 :]
 
 
+def _damage_ros1_header_op(data: bytes) -> bytes:
+    """The bag header record's op code set to 0, no record type: rosbags' own error message then
+    failed in the standard library (ValueError from the enum lookup)."""
+    at = data.index(b"op=\x03") + len(b"op=")
+    return data[:at] + b"\x00" + data[at + 1 :]
+
+
 def _damage_tf_static(value: float, offset: int) -> Callable[[bytes], bytes]:
     """The float64 `offset` places after the start of the base_link -> rear_mount translation in
     /tf_static (x, y, z, then the quaternion's x, y, z, w) set to `value`. The fuzzer found a
@@ -182,8 +189,15 @@ def _null_sqlite_topic(path: Path) -> None:
         ("mcap", _damage_mcap_length(2**50)),
         ("mcap", _damage_mcap_length(2**64 - 1)),
         ("bag", _damage_ros1_time),
+        ("bag", _damage_ros1_header_op),
     ],
-    ids=["mcap-topic-not-utf8", "mcap-length-absurd", "mcap-length-past-ssize_t", "ros1-time"],
+    ids=[
+        "mcap-topic-not-utf8",
+        "mcap-length-absurd",
+        "mcap-length-past-ssize_t",
+        "ros1-time",
+        "ros1-header-op",
+    ],
 )
 def test_damage_the_fuzzer_found_is_a_corrupt_recording(
     originals: dict[str, bytes], name: str, damage: Callable[[bytes], bytes], tmp_path: Path
