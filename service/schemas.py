@@ -7,7 +7,7 @@ import uuid
 from datetime import datetime
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, JsonValue
+from pydantic import BaseModel, ConfigDict, Field, JsonValue, StrictFloat
 
 from service.models import RunKind, RunStatus
 from service.problems import Problem
@@ -16,8 +16,10 @@ ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 
 RobotId = Annotated[str, Field(pattern=ROBOT_ID_PATTERN, examples=["R1"])]
-Vector3 = tuple[float, float, float]
-Quaternion = tuple[float, float, float, float]
+# Numbers in request bodies must be JSON numbers: lax parsing read `true` as 1.0 and "0.5" as 0.5
+# (the API fuzzer had a tolerance limit that was no number accepted; `true` became 1 m).
+Vector3 = tuple[StrictFloat, StrictFloat, StrictFloat]
+Quaternion = tuple[StrictFloat, StrictFloat, StrictFloat, StrictFloat]
 
 
 class _Strict(BaseModel):
@@ -158,19 +160,19 @@ class HistoryPage(BaseModel):
 class ToleranceLimits(_Strict):
     """Limits a run must meet to pass; an unset limit is not checked."""
 
-    max_metric_error_m: float | None = Field(default=None, gt=0)
-    max_translation_stddev_m: float | None = Field(default=None, gt=0)
-    max_rotation_stddev_deg: float | None = Field(default=None, gt=0)
-    max_translation_drift_m: float | None = Field(
+    max_metric_error_m: StrictFloat | None = Field(default=None, gt=0)
+    max_translation_stddev_m: StrictFloat | None = Field(default=None, gt=0)
+    max_rotation_stddev_deg: StrictFloat | None = Field(default=None, gt=0)
+    max_translation_drift_m: StrictFloat | None = Field(
         default=None,
         gt=0,
         description="Maintenance runs: change from the last accepted calibration.",
     )
-    max_rotation_drift_deg: float | None = Field(default=None, gt=0)
-    max_translation_deviation_m: float | None = Field(
+    max_rotation_drift_deg: StrictFloat | None = Field(default=None, gt=0)
+    max_translation_deviation_m: StrictFloat | None = Field(
         default=None, gt=0, description="End-of-line runs: difference from the design extrinsics."
     )
-    max_rotation_deviation_deg: float | None = Field(default=None, gt=0)
+    max_rotation_deviation_deg: StrictFloat | None = Field(default=None, gt=0)
 
 
 class ToleranceProfileIn(_Strict):

@@ -68,6 +68,14 @@ def test_one_default_and_one_profile_per_model(api: Api) -> None:
         },
         {"robot_model": "has space"},
         {"is_default": "perhaps"},
+        # Numbers must be JSON numbers (the API fuzzer's find: `true` was stored as 1 m).
+        {"limits": {"max_translation_drift_m": True}},
+        {"limits": {"max_rotation_drift_deg": "0.5"}},
+        {
+            "design_extrinsics": {
+                "lidar_front": {"translation": [0, 0, "1"], "rotation_xyzw": [0, 0, 0, 1]}
+            }
+        },
     ],
 )
 def test_bad_profiles_are_refused(api: Api, body: dict[str, object]) -> None:
