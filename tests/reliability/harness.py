@@ -3,7 +3,6 @@ and API processes that a test can kill with SIGKILL, and the database rows to ju
 
 from __future__ import annotations
 
-import hashlib
 import os
 import signal
 import socket
@@ -23,6 +22,7 @@ from service.db import Database
 from service.models import LidarExtrinsic, Result, RunKind
 from service.settings import Settings
 from service.storage import make_storage
+from tests.service.uploads import new_upload
 from tests.workers.runs import ROOT, entrypoint_env, run_row, wait_for
 
 QUICK = {
@@ -60,15 +60,13 @@ def store_run(
     with db.transaction() as session:
         repository.record_upload(
             session,
-            repository.NewUpload(
+            new_upload(
+                robot_id,
                 run_id=run_id,
-                robot_id=robot_id,
                 kind=kind,
-                size=len(body),
-                sha256=hashlib.sha256(body).hexdigest(),
+                body=body,
                 format=detected.value,
                 storage_key=key,
-                idempotency_key=None,
                 config=config,
                 max_attempts=max_attempts,
             ),

@@ -19,6 +19,7 @@ from service.models import LidarExtrinsic, Result, Robot, Run, RunKind, RunStatu
 from service.problems import problem_document
 from service.settings import Settings
 from tests.service.documents import result_document
+from tests.service.uploads import new_upload
 
 
 @pytest.fixture
@@ -36,17 +37,12 @@ def queued_run(
     create_robot: bool = True,
 ) -> uuid.UUID:
     run_id = uuid.uuid4()
-    upload = repository.NewUpload(
+    upload = new_upload(
+        robot_id,
         run_id=run_id,
-        robot_id=robot_id,
         kind=RunKind.MAINTENANCE,
         size=10,
-        sha256="0" * 64,
-        format="mcap",
-        storage_key=f"recordings/{robot_id}/{run_id}",
         idempotency_key=idempotency_key,
-        config=None,
-        max_attempts=3,
     )
     with db.transaction() as session:
         repository.record_upload(session, upload, create_robot=create_robot)
@@ -77,7 +73,7 @@ def test_two_first_uploads_of_a_new_robot_both_succeed(db: Database) -> None:
     # the second waits on it (PostgreSQL row lock, SQLite write lock) and must not fail.
     first = db.write_session()
     first.begin()
-    repository.record_upload(first, _upload("R5"), create_robot=True)
+    repository.record_upload(first, new_upload("R5"), create_robot=True)
     outcome: list[object] = []
     second = threading.Thread(target=lambda: outcome.append(_record_or_error(db, "R5")))
     second.start()
@@ -91,26 +87,10 @@ def test_two_first_uploads_of_a_new_robot_both_succeed(db: Database) -> None:
         assert session.scalar(select(func.count()).select_from(Robot)) == 1
 
 
-def _upload(robot_id: str) -> repository.NewUpload:
-    run_id = uuid.uuid4()
-    return repository.NewUpload(
-        run_id=run_id,
-        robot_id=robot_id,
-        kind=RunKind.END_OF_LINE,
-        size=1,
-        sha256="0" * 64,
-        format="mcap",
-        storage_key=f"recordings/{robot_id}/{run_id}",
-        idempotency_key=None,
-        config=None,
-        max_attempts=3,
-    )
-
-
 def _record_or_error(db: Database, robot_id: str) -> object:
     try:
         with db.transaction() as session:
-            repository.record_upload(session, _upload(robot_id), create_robot=True)
+            repository.record_upload(session, new_upload(robot_id), create_robot=True)
     except Exception as err:  # the test reports what went wrong instead of hanging
         return err
     return "ok"

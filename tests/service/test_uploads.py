@@ -24,6 +24,7 @@ from service.deps import Services
 from service.settings import Settings
 from service.storage import LocalStorage
 from tests.service.conftest import make_keys, recording, running_api
+from tests.service.uploads import new_upload
 
 MIB = 1024 * 1024
 
@@ -271,25 +272,13 @@ def test_recordings_no_run_points_at_are_swept_at_start(tmp_path: Path) -> None:
     import os
 
     from service import repository
-    from service.enums import RunKind
 
     services = start_services(Settings(data_dir=tmp_path))
     kept_key = repository.recording_key("R1", uuid.uuid4())
     with services.db.transaction() as session:
         repository.record_upload(
             session,
-            repository.NewUpload(
-                run_id=uuid.UUID(kept_key.rsplit("/", 1)[-1]),
-                robot_id="R1",
-                kind=RunKind.END_OF_LINE,
-                size=1,
-                sha256="0" * 64,
-                format="mcap",
-                storage_key=kept_key,
-                idempotency_key=None,
-                config=None,
-                max_attempts=3,
-            ),
+            new_upload(run_id=uuid.UUID(kept_key.rsplit("/", 1)[-1]), storage_key=kept_key),
             create_robot=True,
         )
     services.db.dispose()

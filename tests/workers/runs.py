@@ -19,6 +19,7 @@ from service import repository
 from service.db import Database
 from service.models import Run, RunKind
 from service.settings import Settings
+from tests.service.uploads import new_upload
 from tests.workers.jobs import SCRIPTED
 from workers.policy import RetryPolicy
 from workers.worker import Worker, WorkerOptions
@@ -42,17 +43,8 @@ def enqueue_many(
     with db.transaction() as session:
         for index, run_id in enumerate(ids):
             robot_id = f"{prefix}{index % robots}" if robots > 1 else prefix
-            upload = repository.NewUpload(
-                run_id=run_id,
-                robot_id=robot_id,
-                kind=kind,
-                size=1,
-                sha256="0" * 64,
-                format="mcap",
-                storage_key=f"recordings/{robot_id}/{run_id}",
-                idempotency_key=None,
-                config=config,
-                max_attempts=max_attempts,
+            upload = new_upload(
+                robot_id, run_id=run_id, kind=kind, config=config, max_attempts=max_attempts
             )
             repository.record_upload(session, upload, create_robot=True)
     return ids

@@ -10,7 +10,6 @@ progress.
 
 from __future__ import annotations
 
-import hashlib
 import uuid
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
@@ -28,6 +27,7 @@ from service.reports import store_report_images
 from service.storage import Storage
 from tests.pipeline.io.recordings import PERTURBATION, TRUE_EXTRINSICS, Spec, write_recording
 from tests.pipeline.test_report import truth_report_input
+from tests.service.uploads import new_upload
 
 PROFILE_LIMITS = {
     "max_metric_error_m": 0.01,
@@ -247,18 +247,7 @@ def _upload(
     with db.transaction() as session:
         run = repository.record_upload(
             session,
-            repository.NewUpload(
-                run_id=run_id,
-                robot_id=robot,
-                kind=kind,
-                size=len(recording),
-                sha256=hashlib.sha256(recording).hexdigest(),
-                format="mcap",
-                storage_key=key,
-                idempotency_key=None,
-                config=None,
-                max_attempts=3,
-            ),
+            new_upload(robot, run_id=run_id, kind=kind, body=recording, storage_key=key),
             create_robot=True,
         )
         # History is about time: each run as if uploaded `at`.

@@ -14,10 +14,11 @@ from typing import Any
 import pytest
 
 from service import repository
-from service.models import Run, RunKind, RunStatus
+from service.models import Run, RunStatus
 from service.settings import Settings
 from tests.service.conftest import MCAP_MAGIC, Api, problem_type, recording, running_api
 from tests.service.documents import result_document
+from tests.service.uploads import new_upload
 
 
 def test_upload_stores_the_recording_and_queues_a_run(api: Api) -> None:
@@ -207,18 +208,7 @@ def test_concurrent_uploads_with_one_idempotency_key_make_one_run(api: Api) -> N
     first.begin()
     repository.record_upload(
         first,
-        repository.NewUpload(
-            run_id=first_id,
-            robot_id="R1",
-            kind=RunKind.END_OF_LINE,
-            size=4096,
-            sha256="0" * 64,
-            format="mcap",
-            storage_key=f"recordings/R1/{first_id}",
-            idempotency_key="race",
-            config=None,
-            max_attempts=3,
-        ),
+        new_upload(run_id=first_id, size=4096, idempotency_key="race"),
         create_robot=True,
     )
     answers: list[Any] = []
