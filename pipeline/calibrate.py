@@ -442,11 +442,8 @@ def calibrate(
     details = {}
     with _timed(stages, "observability", details):
         uncertainties = pose_uncertainties(
-            result.information,
-            result.variance_factor,
-            result.layout,
+            result,
             T_base_ref,
-            result.T_ref_lidar,
             None if floor_ref is None else floor_ref.normal,
             config.observability,
         )
