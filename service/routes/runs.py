@@ -9,7 +9,6 @@ from typing import Annotated, Any
 import anyio
 from anyio import to_thread
 from fastapi import APIRouter, Header, Query, Request, Response
-from pydantic import AwareDatetime
 from sqlalchemy.exc import IntegrityError
 
 from service import repository
@@ -19,16 +18,17 @@ from service.pagination import (
     PAGE_SIZE_DEFAULT,
     PAGE_SIZE_MAX,
     cursor_datetime,
+    cursor_uuid,
     decode_cursor,
     encode_cursor,
 )
+from service.parameters import CursorQuery, SinceQuery, UntilQuery
 from service.problems import (
     PROBLEM_RESPONSES,
     ApiError,
     Forbidden,
     IdempotencyKeyReused,
     InvalidConfig,
-    InvalidCursor,
     InvalidHeader,
     Problem,
     RobotNotFound,
@@ -181,18 +181,15 @@ def list_runs(
         bool | None, Query(description="Verdict; runs without a result never match.")
     ] = None,
     kind: RunKind | None = None,
-    since: Annotated[AwareDatetime | None, Query(description="Uploaded at or after.")] = None,
-    until: Annotated[AwareDatetime | None, Query(description="Uploaded before.")] = None,
+    since: SinceQuery = None,
+    until: UntilQuery = None,
     limit: Annotated[int, Query(ge=1, le=PAGE_SIZE_MAX)] = PAGE_SIZE_DEFAULT,
-    cursor: Annotated[str | None, Query(max_length=512)] = None,
+    cursor: CursorQuery = None,
 ) -> RunPage:
     after = None
     if cursor is not None:
-        created, run_id = decode_cursor(cursor, "runs", 2)
-        try:
-            after = (cursor_datetime(created), uuid.UUID(run_id))
-        except ValueError as err:
-            raise InvalidCursor("the cursor is damaged; start again without a cursor") from err
+        created, run_id = decode_cursor(cursor, "runs", cursor_datetime, cursor_uuid)
+        after = (created, run_id)
     where = repository.RunFilter(
         robot_id=robot_id, status=status, kind=kind, passed=passed, since=since, until=until
     )
