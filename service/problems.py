@@ -86,7 +86,9 @@ NotFound = _error("not-found", "Not found", HTTPStatus.NOT_FOUND)
 InvalidRequest = _error("invalid-request", "Invalid request", HTTPStatus.UNPROCESSABLE_ENTITY)
 InvalidCursor = _error("invalid-cursor", "Invalid pagination cursor", HTTPStatus.BAD_REQUEST)
 InvalidHeader = _error("invalid-header", "Invalid request header", HTTPStatus.BAD_REQUEST)
-InvalidConfig = _error("invalid-config", "Invalid calibration config", HTTPStatus.BAD_REQUEST)
+InvalidConfig = _error(
+    "invalid-config", "Invalid calibration config", HTTPStatus.UNPROCESSABLE_ENTITY
+)
 MethodNotAllowed = _error("method-not-allowed", "Method not allowed", HTTPStatus.METHOD_NOT_ALLOWED)
 Conflict = _error("conflict", "Conflicting request", HTTPStatus.CONFLICT)
 # Uploads.

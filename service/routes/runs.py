@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import json
 import uuid
-from typing import Annotated, Any
+from typing import Annotated
 
 import anyio
 from anyio import to_thread
@@ -28,12 +27,12 @@ from service.problems import (
     ApiError,
     Forbidden,
     IdempotencyKeyReused,
-    InvalidConfig,
     InvalidHeader,
     Problem,
     RobotNotFound,
     RunNotFound,
 )
+from service.run_config import parse_run_config
 from service.schemas import ROBOT_ID_PATTERN, RunPage, RunPublic, RunSummary, UploadInfo
 from service.uploads import stream_to_storage
 
@@ -97,7 +96,8 @@ async def upload_run(
             alias="X-Fleetcal-Config",
             max_length=MAX_CONFIG_HEADER_CHARS,
             description="Calibration config as a JSON object (reference LiDAR, initial "
-            "extrinsics, ...), checked by the worker.",
+            "extrinsics, ...): a `PipelineConfig` without `verdict`; an invalid one is refused "
+            "(422).",
         ),
     ] = None,
 ) -> RunPublic:
@@ -105,7 +105,7 @@ async def upload_run(
     then record the run as `queued` in the same transaction as the upload."""
     if not principal.may_upload_for(robot_id):
         raise Forbidden(f"this key may not upload for robot {robot_id!r}")
-    parsed_config = _parse_config(config)
+    parsed_config = parse_run_config(config)
     declared_length = _content_length(request)
     settings = services.settings
 
@@ -237,18 +237,6 @@ def run_public(run: Run, result: Result | None) -> RunPublic:
         result=result.document if result else None,
         error=Problem.model_validate(run.error) if run.error else None,
     )
-
-
-def _parse_config(raw: str | None) -> dict[str, Any] | None:
-    if raw is None:
-        return None
-    try:
-        value = json.loads(raw)
-    except ValueError as err:
-        raise InvalidConfig(f"X-Fleetcal-Config is not valid JSON: {err}") from err
-    if not isinstance(value, dict):
-        raise InvalidConfig("X-Fleetcal-Config must be a JSON object")
-    return value
 
 
 def _content_length(request: Request) -> int | None:
