@@ -140,10 +140,6 @@ def problem_for(exc: Exception) -> ApiError:
     if isinstance(exc, StarletteHTTPException):
         if exc.status_code == HTTPStatus.NOT_FOUND:
             return NotFound("no such endpoint; see /docs or openapi/openapi.json")
-        if exc.status_code == HTTPStatus.METHOD_NOT_ALLOWED:
-            return MethodNotAllowed(
-                "this endpoint does not support the method", headers=dict(exc.headers or {})
-            )
         generic = _error(
             "http-error", HTTPStatus(exc.status_code).phrase, HTTPStatus(exc.status_code)
         )
@@ -172,6 +168,10 @@ async def _handle(request: Request, exc: Exception) -> JSONResponse:
             problem.slug,
             exc_info=(type(exc), exc, exc.__traceback__),
         )
+    return problem_response(problem)
+
+
+def problem_response(problem: ApiError) -> JSONResponse:
     return JSONResponse(
         problem.document(),
         status_code=problem.status,
