@@ -201,7 +201,7 @@ class ToleranceLimits(_Strict):
 _DESIGN_EXTRINSICS = "The model's design `T_base_lidar` per LiDAR frame."
 
 
-class ToleranceProfileIn(_Strict):
+class _ToleranceProfileFields(_Strict):
     robot_model: str | None = Field(
         default=None, pattern=NAME_PATTERN, description="The robot model this profile applies to."
     )
@@ -212,12 +212,15 @@ class ToleranceProfileIn(_Strict):
         "profile; setting it clears the flag on the previous default.",
     )
     limits: ToleranceLimits = Field(default_factory=ToleranceLimits)
+
+
+class ToleranceProfileIn(_ToleranceProfileFields):
     design_extrinsics: dict[PlainText, Pose] | None = Field(
         default=None, description=_DESIGN_EXTRINSICS
     )
 
 
-class ToleranceProfilePublic(ToleranceProfileIn):
+class ToleranceProfilePublic(_ToleranceProfileFields):
     model_config = ConfigDict(extra="ignore")
 
     # As stored: a profile accepted before poses were checked must still show, to be replaced.
