@@ -89,9 +89,9 @@ def test_the_overview_lists_the_robots_with_their_latest_run(
 ) -> None:
     browser = signed_in
     open_page(browser, live_app.url, "/")
-    rows = wait_for(browser, "table#fleet tbody tr", count=3)
+    rows = wait_for(browser, "table#fleet tbody tr", count=5)
     by_robot = {row.get_attribute("data-robot-id"): row for row in rows}
-    assert sorted(by_robot) == ["R1", "R2", "R3"]
+    assert sorted(by_robot) == ["R1", "R2", "R3", "R4", "R5"]
     r1 = by_robot["R1"]
     assert (
         r1.find_element("css selector", "[data-verdict]").get_attribute("data-verdict") == "passed"
@@ -101,7 +101,7 @@ def test_the_overview_lists_the_robots_with_their_latest_run(
     assert by_robot["R3"].find_element("css selector", "[data-status]").text == "running"
     # The key was entered once: a reload keeps it (session storage), no form again.
     open_page(browser, live_app.url, "/")
-    assert len(wait_for(browser, "table#fleet tbody tr", count=3)) == 3
+    assert len(wait_for(browser, "table#fleet tbody tr", count=5)) == 5
     screenshot(browser, artifacts_dir, "overview")
 
 
