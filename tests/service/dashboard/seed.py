@@ -229,6 +229,7 @@ def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[st
             design_extrinsics=None,
         )
         repository.put_robot(session, "R1", model="demo-bot", metadata={"site": "line 2"})
+        repository.put_robot(session, "R4", model="demo-bot", metadata={"site": "line 3"})
 
     documents: dict[uuid.UUID, dict[str, Any]] = {}
     eol = _upload(db, storage, recording, "R1", RunKind.END_OF_LINE, now - timedelta(days=20))
