@@ -46,6 +46,7 @@ def report(summary: RecordingSummary, warnings: tuple[str, ...]) -> dict[str, An
                 "scans": lidar.scans,
                 "points_per_second": lidar.points_per_second,
                 "scan_pattern": str(lidar.scan_pattern),
+                "scan_pattern_basis": lidar.scan_pattern_basis,
                 "valid_points_in_stops": sum(
                     stop.clouds[lidar.frame].valid_points
                     for stop in summary.stops

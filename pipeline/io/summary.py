@@ -18,7 +18,8 @@ class LidarSummary:
 
     `points` counts every point published (`width * height`, valid or not); `period_s` is the
     median spacing of its scan stamps. `extrinsic_source` is `config`, `tf_static` or None.
-    `scan_pattern`: from its first scan's fields (see `pointcloud.scan_pattern`).
+    `scan_pattern`: from its first scan's fields, else from its first scans' points
+    (`scan_pattern`); `scan_pattern_basis` says which, in words.
     """
 
     frame: str
@@ -30,6 +31,7 @@ class LidarSummary:
     T_base_lidar: Matrix4 | None
     extrinsic_source: str | None
     scan_pattern: ScanPattern = ScanPattern.NON_REPETITIVE
+    scan_pattern_basis: str = ""
 
     @property
     def points_per_second(self) -> float:
