@@ -44,7 +44,18 @@ class StopDetectionConfig(BaseModel):
 
     max_linear_speed: float = Field(default=0.02, gt=0, description="m/s")
     max_angular_speed_deg: float = Field(default=1.0, gt=0, description="deg/s")
-    min_dwell_s: float = Field(default=1.0, gt=0, description="shortest stop kept, seconds")
+    min_dwell_s: float = Field(
+        default=0.3,
+        gt=0,
+        description="shortest stop kept, seconds (routines stop for 0.3-3 s; a stop under "
+        "1 s is kept with a warning, see WarningThresholds.short_stop_s)",
+    )
+    min_scan_periods: float = Field(
+        default=3.0,
+        ge=0,
+        description="... or this many scan periods of the slowest LiDAR, if longer: a stop that "
+        "long holds at least one scan wholly inside it, whatever the scans' phase",
+    )
     speed_window_s: float = Field(
         default=0.2,
         ge=0,
@@ -100,6 +111,10 @@ class ReaderConfig(BaseModel):
     """Initial `T_base_lidar` by LiDAR frame; overrides `/tf_static`."""
     drop_zero_points: bool = True
     """Drop points exactly at the sensor origin, the no-return marker of some drivers (Livox)."""
+    clock_tolerance_s: float = Field(default=0.5, gt=0)
+    """A LiDAR whose header stamps lag its log times by more than this beyond the trajectory's
+    lag is on another clock, and is realigned onto the trajectory's (see `pipeline.io.clocks`);
+    within it, the difference is transport latency and the header stamps are kept."""
     stops: StopDetectionConfig = StopDetectionConfig()
     archive: ArchiveLimits = ArchiveLimits()
     warnings: WarningThresholds = WarningThresholds()

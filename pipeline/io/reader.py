@@ -1,8 +1,11 @@
 """Read a calibration recording into a `CalibrationProblem` (DESIGN.md's input contract).
 
-Two passes: the first reads `/tf_static` and the trajectory (small messages) and finds the stops;
-the second streams the PointCloud2 topics once, counts every scan and decodes only the scans
-inside a stop. Memory therefore holds the stop clouds, not the recording.
+Two passes: the first reads `/tf_static` and the trajectory (small messages), then each LiDAR's
+first scans for its clock and scan period, and finds the stops; the second streams the
+PointCloud2 topics once, counts every scan and decodes only the scans inside a stop. Memory
+therefore holds the stop clouds, not the recording. Scans are matched to stops on the
+trajectory's header clock (see `clocks`); the times reported (stops, the recording) are on the
+bag's log clock, the one `ros2 bag info` shows.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import numpy as np
 from rosbags.interfaces import Connection
 
 from pipeline.io.checks import recording_warnings, require_extrinsics, require_stop_points
+from pipeline.io.clocks import NS, LidarClock, clock_notes, probe_lidar_clocks
 from pipeline.io.config import ReaderConfig
 from pipeline.io.errors import (
     NoPointCloudError,
@@ -39,8 +43,9 @@ from pipeline.io.tf_tree import normalize_frame
 from pipeline.io.typestores import POINTCLOUD2
 from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, ScanPattern, Stop
 
-# Scans reach the bag after their stamp; a stop is closed once the log time is this far past it.
-_CLOSE_SLACK_NS = 2_000_000_000
+# Scans reach the bag after their stamp; a stop is closed once the log time (on the trajectory's
+# clock) is this far past it, plus the clock tolerance (latency a LiDAR's stamps may have).
+_CLOSE_SLACK_NS = 2 * NS
 
 
 def read_recording(path: Path | str, config: ReaderConfig | None = None) -> CalibrationProblem:
@@ -110,10 +115,16 @@ def summarize_recording(
             odom_frame=normalize_frame(config.odom_frame),
             base_frame=base_frame,
         )
-        stops = _stops(opened, motion, config)
-        clouds, lidar_stats = _read_clouds(opened, topics, stops, config, keep_points)
+        clocks = probe_lidar_clocks(
+            opened, topics, motion.clock, tolerance_ns=round(config.clock_tolerance_s * NS)
+        )
+        stops = _stops(opened, motion, clocks, config)
+        clouds, lidar_stats = _read_clouds(
+            opened, topics, stops, clocks, motion, config, keep_points
+        )
         t_start, t_end, count = opened.start_time, opened.end_time, opened.message_count
-    lidars, notes = _lidars(opened, lidar_stats, clouds, motion, config)
+    lidars, notes = _lidars(opened, lidar_stats, clouds, clocks, motion, config)
+    to_log = motion.clock.offset_ns  # stops are reported on the log clock
     summary = RecordingSummary(
         path=str(path),
         format=opened.format.value,
@@ -122,20 +133,25 @@ def summarize_recording(
         t_end_ns=t_end,
         message_count=count,
         trajectory_source=motion.trajectory.source,
+        trajectory_clock_offset_ns=to_log,
         odom_frame=motion.odom_frame,
         base_frame=base_frame,
         lidars=lidars,
         stops=tuple(
             StopSummary(
                 k,
-                stop.t_start_ns,
-                stop.t_end_ns,
+                stop.t_start_ns + to_log,
+                stop.t_end_ns + to_log,
                 stop.T_odom_base,
                 MappingProxyType(clouds.closed[k]),
             )
             for k, stop in enumerate(stops)
         ),
-        notes=(*motion.notes, *notes),
+        notes=(
+            *motion.notes,
+            *clock_notes(motion.trajectory.source, motion.clock, clocks.values()),
+            *notes,
+        ),
     )
     require_stop_points(summary)
     return summary
@@ -188,19 +204,28 @@ def _lidar_topics(opened: OpenRecording, wanted: tuple[str, ...]) -> dict[str, l
     return dict(clouds)
 
 
-def _stops(opened: OpenRecording, motion: Motion, config: ReaderConfig) -> tuple[StopSpan, ...]:
-    settings = config.stops.model_dump()
-    stops = detect_stops(motion.trajectory, **settings)
+def _stops(
+    opened: OpenRecording, motion: Motion, clocks: dict[str, LidarClock], config: ReaderConfig
+) -> tuple[StopSpan, ...]:
+    settings = config.stops.model_dump(exclude={"min_dwell_s", "min_scan_periods"})
+    slowest = max(clocks.values(), key=lambda clock: clock.period_ns, default=None)
+    min_dwell_s, why = config.stops.min_dwell_s, "min_dwell_s"
+    if slowest is not None and config.stops.min_scan_periods * slowest.period_ns / NS > min_dwell_s:
+        min_dwell_s = config.stops.min_scan_periods * slowest.period_ns / NS
+        why = (
+            f"{config.stops.min_scan_periods:g} scan periods of {slowest.topic} "
+            f"({slowest.period_ns / NS:.3f} s each; min_dwell_s is {config.stops.min_dwell_s} s)"
+        )
+    stops = detect_stops(motion.trajectory, min_dwell_s=min_dwell_s, **settings)
     if stops:
         return stops
-    settings.pop("min_dwell_s")
     runs = still_runs(motion.trajectory, **settings)
     longest = float(runs.durations_s.max()) if len(runs.durations_s) else 0.0
     raise NoStopsError(
         f"{opened.path}: no stops found in the trajectory ({motion.trajectory.source}, "
         f"{len(motion.trajectory)} poses): the robot never stood still (under "
         f"{config.stops.max_linear_speed} m/s and {config.stops.max_angular_speed_deg} deg/s) for "
-        f"{config.stops.min_dwell_s} s; its longest still span lasted {longest:.2f} s. Record a "
+        f"{min_dwell_s:.2f} s ({why}); its longest still span lasted {longest:.2f} s. Record a "
         "stop-and-go routine, or loosen the stops settings of the reader config"
     )
 
@@ -209,10 +234,13 @@ def _read_clouds(
     opened: OpenRecording,
     topics: dict[str, list[Connection]],
     stops: tuple[StopSpan, ...],
+    clocks: dict[str, LidarClock],
+    motion: Motion,
     config: ReaderConfig,
     keep_points: bool,
 ) -> tuple[StopClouds, dict[str, _TopicStats]]:
     clouds = StopClouds(stops, keep_points=keep_points)
+    slack_ns = _CLOSE_SLACK_NS + round(config.clock_tolerance_s * NS)
     stats = {topic: _TopicStats(topic) for topic in topics}
     frame_topic: dict[str, str] = {}
     connections = [c for group in topics.values() for c in group]
@@ -230,7 +258,7 @@ def _read_clouds(
                 raise RecordingError(
                     f"scans on {topic} have an empty header.frame_id; name each LiDAR's frame"
                 )
-            stamp = stamp_ns(msg.header) or log_ns
+            stamp = clocks[topic].on_trajectory_clock(stamp_ns(msg.header), log_ns)
             stats[topic].add(frame, stamp, point_count(msg), scan_pattern(msg))
             points = None
             if clouds.stop_index(stamp) is not None:
@@ -238,7 +266,7 @@ def _read_clouds(
                     msg, topic, drop_zero_points=config.drop_zero_points, dtype=None
                 )
             clouds.add_scan(frame, stamp, points)
-            clouds.close_before(log_ns - _CLOSE_SLACK_NS)
+            clouds.close_before(log_ns - motion.clock.offset_ns - slack_ns)
     clouds.close_all()
     return clouds, stats
 
@@ -247,10 +275,17 @@ def _lidars(
     opened: OpenRecording,
     stats: dict[str, _TopicStats],
     clouds: StopClouds,
+    clocks: dict[str, LidarClock],
     motion: Motion,
     config: ReaderConfig,
 ) -> tuple[tuple[LidarSummary, ...], list[str]]:
     notes = [f"{topic} has no scans and was ignored" for topic, s in stats.items() if not s.scans]
+    notes += [
+        f"{count} scans of {frame} reached the recording more than "
+        f"{_CLOSE_SLACK_NS / NS + config.clock_tolerance_s:g} s after their stamps, when their "
+        "stop was closed, and were left out of it; check the LiDAR's stamps"
+        for frame, count in sorted(clouds.late.items())
+    ]
     present = sorted((s for s in stats.values() if s.scans), key=lambda s: s.frame)
     if len(present) < 2:
         raise TooFewLidarsError(
@@ -280,6 +315,8 @@ def _lidars(
                 T_base_lidar=None if T is None else np.asarray(T, dtype=np.float64),
                 extrinsic_source=None if T is None else source,
                 scan_pattern=s.scan_pattern,
+                clock_offset_ns=clocks[s.topic].clock.offset_ns,
+                clock_shift_ns=clocks[s.topic].shift_ns,
             )
         )
     return tuple(lidars), notes

@@ -47,8 +47,8 @@ def test_text_output(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "format      ros1 (ros1 storage)" in result.stdout
     assert "lidar_rear   /lidar_rear/points  51 scans, 0.6 k points/s" in result.stdout
-    assert "stops       2 (mean 1.9 s; times from the recording's start)" in result.stdout
-    assert "    1     3.08 -    5.00 s  (1.9 s)" in result.stdout
+    assert "stops       2 (mean 2.0 s; times from the recording's start)" in result.stdout
+    assert "    1     3.00 -    5.00 s  (2.0 s)" in result.stdout
     assert "- too few stops: 2 found" in result.stdout
 
 

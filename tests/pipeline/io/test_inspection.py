@@ -63,6 +63,6 @@ def test_lidar_that_sees_almost_nothing(tmp_path: Path) -> None:
 
 
 def test_unusable_recording_still_raises(tmp_path: Path) -> None:
-    write_recording(tmp_path / "r", WriterFormat.ROS2_MCAP, Spec(stops=2, points=50, dwell_s=0.5))
+    write_recording(tmp_path / "r", WriterFormat.ROS2_MCAP, Spec(stops=2, points=50, dwell_s=0.2))
     with pytest.raises(NoStopsError, match=r"no stops found"):
         inspect_recording(tmp_path / "r")
