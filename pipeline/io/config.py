@@ -93,6 +93,20 @@ class WarningThresholds(BaseModel):
     min_relative_points: float = Field(
         default=0.05, ge=0, le=1, description="same, relative to the median LiDAR's points per stop"
     )
+    short_stop_s: float = Field(
+        default=1.0,
+        ge=0,
+        description="stops shorter than this are kept, with a warning: the benchmark's routines "
+        "all stop at least this long, so shorter ones are outside what it has measured",
+    )
+    min_scans_per_stop: int = Field(
+        default=6,
+        ge=0,
+        description="a LiDAR with fewer scans wholly inside a stop has a sparse cloud there (a "
+        "non-repetitive pattern fills its field of view in over many scans); kept, with a warning. "
+        "Issue 13 saw 0.5 s stops (4-5 scans of a rosette) calibrate to 22 mm, 0.8 s stops (7) "
+        "to 1-3 mm",
+    )
 
 
 class ReaderConfig(BaseModel):
