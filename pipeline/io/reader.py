@@ -1,8 +1,11 @@
 """Read a calibration recording into a `CalibrationProblem` (DESIGN.md's input contract).
 
-Two passes: the first reads `/tf_static` and the trajectory (small messages) and finds the stops;
-the second streams the PointCloud2 topics once, counts every scan and decodes only the scans
-inside a stop. Memory therefore holds the stop clouds, not the recording.
+Two passes: the first reads `/tf_static` and the trajectory (small messages), then each LiDAR's
+first scans for its clock and scan period, and finds the stops; the second streams the
+PointCloud2 topics once, counts every scan and decodes only the scans inside a stop. Memory
+therefore holds the stop clouds, not the recording. Scans are matched to stops on the
+trajectory's header clock (see `clocks`); the times reported (stops, the recording) are on the
+bag's log clock, the one `ros2 bag info` shows.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import numpy as np
 from rosbags.interfaces import Connection
 
 from pipeline.io.checks import recording_warnings, require_extrinsics, require_stop_points
+from pipeline.io.clocks import NS, LidarClock, clock_notes, probe_lidar_clocks
 from pipeline.io.config import ReaderConfig
 from pipeline.io.errors import (
     EmptyRecordingError,
@@ -57,8 +61,9 @@ RADAR_FIELDS = (
     "range_rate",
 )
 
-# Scans reach the bag after their stamp; a stop is closed once the log time is this far past it.
-_CLOSE_SLACK_NS = 2_000_000_000
+# Scans reach the bag after their stamp; a stop is closed once the log time (on the trajectory's
+# clock) is this far past it, plus the clock tolerance (latency a LiDAR's stamps may have).
+_CLOSE_SLACK_NS = 2 * NS
 
 
 def read_recording(path: Path | str, config: ReaderConfig | None = None) -> CalibrationProblem:
@@ -128,15 +133,21 @@ def summarize_recording(
             odom_frame=normalize_frame(config.odom_frame),
             base_frame=base_frame,
         )
-        stops = _stops(opened, motion, config)
-        clouds, lidar_stats, radars = _read_clouds(opened, topics, stops, config, keep_points)
+        clocks = probe_lidar_clocks(
+            opened, topics, motion.clock, tolerance_ns=round(config.clock_tolerance_s * NS)
+        )
+        stops = _stops(opened, motion, clocks, config)
+        clouds, lidar_stats, radars = _read_clouds(
+            opened, topics, stops, clocks, motion, config, keep_points
+        )
         t_start, t_end, count = opened.start_time, opened.end_time, opened.message_count
     topic_notes += [
         f"{topic} left out: its fields {', '.join(fields)} are a radar's, not a LiDAR's; "
         "to read it as a LiDAR, list the LiDAR topics in reader.lidar_topics"
         for topic, fields in radars.items()
     ]
-    lidars, notes = _lidars(opened, lidar_stats, clouds, motion, config, topic_notes)
+    lidars, notes = _lidars(opened, lidar_stats, clouds, clocks, motion, config, topic_notes)
+    to_log = motion.clock.offset_ns  # stops are reported on the log clock
     summary = RecordingSummary(
         path=str(path),
         format=opened.format.value,
@@ -145,20 +156,26 @@ def summarize_recording(
         t_end_ns=t_end,
         message_count=count,
         trajectory_source=motion.trajectory.source,
+        trajectory_clock_offset_ns=to_log,
         odom_frame=motion.odom_frame,
         base_frame=base_frame,
         lidars=lidars,
         stops=tuple(
             StopSummary(
                 k,
-                stop.t_start_ns,
-                stop.t_end_ns,
+                stop.t_start_ns + to_log,
+                stop.t_end_ns + to_log,
                 stop.T_odom_base,
                 MappingProxyType(clouds.closed[k]),
             )
             for k, stop in enumerate(stops)
         ),
-        notes=(*topic_notes, *motion.notes, *notes),
+        notes=(
+            *topic_notes,
+            *motion.notes,
+            *clock_notes(motion.trajectory.source, motion.clock, clocks.values()),
+            *notes,
+        ),
     )
     require_stop_points(summary)
     return summary
@@ -249,19 +266,28 @@ def _lidar_topics(
     return dict(clouds), notes
 
 
-def _stops(opened: OpenRecording, motion: Motion, config: ReaderConfig) -> tuple[StopSpan, ...]:
-    settings = config.stops.model_dump()
-    stops = detect_stops(motion.trajectory, **settings)
+def _stops(
+    opened: OpenRecording, motion: Motion, clocks: dict[str, LidarClock], config: ReaderConfig
+) -> tuple[StopSpan, ...]:
+    settings = config.stops.model_dump(exclude={"min_dwell_s", "min_scan_periods"})
+    slowest = max(clocks.values(), key=lambda clock: clock.period_ns, default=None)
+    min_dwell_s, why = config.stops.min_dwell_s, "min_dwell_s"
+    if slowest is not None and config.stops.min_scan_periods * slowest.period_ns / NS > min_dwell_s:
+        min_dwell_s = config.stops.min_scan_periods * slowest.period_ns / NS
+        why = (
+            f"{config.stops.min_scan_periods:g} scan periods of {slowest.topic} "
+            f"({slowest.period_ns / NS:.3f} s each; min_dwell_s is {config.stops.min_dwell_s} s)"
+        )
+    stops = detect_stops(motion.trajectory, min_dwell_s=min_dwell_s, **settings)
     if stops:
         return stops
-    settings.pop("min_dwell_s")
     runs = still_runs(motion.trajectory, **settings)
     longest = float(runs.durations_s.max()) if len(runs.durations_s) else 0.0
     raise NoStopsError(
         f"{opened.path}: no stops found in the trajectory ({motion.trajectory.source}, "
         f"{len(motion.trajectory)} poses): the robot never stood still (under "
         f"{config.stops.max_linear_speed} m/s and {config.stops.max_angular_speed_deg} deg/s) for "
-        f"{config.stops.min_dwell_s} s; its longest still span lasted {longest:.2f} s. Record a "
+        f"{min_dwell_s:.2f} s ({why}); its longest still span lasted {longest:.2f} s. Record a "
         "stop-and-go routine, or loosen the stops settings of the reader config"
     )
 
@@ -270,12 +296,15 @@ def _read_clouds(
     opened: OpenRecording,
     topics: dict[str, list[Connection]],
     stops: tuple[StopSpan, ...],
+    clocks: dict[str, LidarClock],
+    motion: Motion,
     config: ReaderConfig,
     keep_points: bool,
 ) -> tuple[StopClouds, dict[str, _TopicStats], dict[str, tuple[str, ...]]]:
     """Stream the LiDAR topics once: stop clouds, per-topic counts and scan patterns, and the
     topics left out as radars (their radar fields) when `lidar_topics` does not name them."""
     clouds = StopClouds(stops, keep_points=keep_points)
+    slack_ns = _CLOSE_SLACK_NS + round(config.clock_tolerance_s * NS)
     stats = {topic: _TopicStats(topic) for topic in topics}
     radars: dict[str, tuple[str, ...]] = {}
     frame_topic: dict[str, str] = {}
@@ -307,7 +336,7 @@ def _read_clouds(
                     f"{opened.path}: scans on {topic} have an empty header.frame_id; name each "
                     "LiDAR's frame"
                 )
-            stamp = stamp_ns(msg.header) or log_ns
+            stamp = clocks[topic].on_trajectory_clock(stamp_ns(msg.header), log_ns)
             topic_stats.add(frame, stamp, point_count(msg), opened.path)
             points = None
             if clouds.stop_index(stamp) is not None or topic_stats.wants_points:
@@ -317,7 +346,7 @@ def _read_clouds(
                 if topic_stats.directions is not None:
                     topic_stats.directions.add(points)
             clouds.add_scan(frame, stamp, points)
-            clouds.close_before(log_ns - _CLOSE_SLACK_NS)
+            clouds.close_before(log_ns - motion.clock.offset_ns - slack_ns)
     clouds.close_all()
     return clouds, {t: s for t, s in stats.items() if t not in radars}, radars
 
@@ -326,13 +355,20 @@ def _lidars(
     opened: OpenRecording,
     stats: dict[str, _TopicStats],
     clouds: StopClouds,
+    clocks: dict[str, LidarClock],
     motion: Motion,
     config: ReaderConfig,
     left_out: list[str],
 ) -> tuple[tuple[LidarSummary, ...], list[str]]:
     """One summary per LiDAR topic with scans, and notes (`left_out`: on topics not read)."""
-    present = sorted((s for s in stats.values() if s.scans), key=lambda s: s.frame)
     notes = [f"{topic} has no scans and was ignored" for topic, s in stats.items() if not s.scans]
+    notes += [
+        f"{count} scans of {frame} reached the recording more than "
+        f"{_CLOSE_SLACK_NS / NS + config.clock_tolerance_s:g} s after their stamps, when their "
+        "stop was closed, and were left out of it; check the LiDAR's stamps"
+        for frame, count in sorted(clouds.late.items())
+    ]
+    present = sorted((s for s in stats.values() if s.scans), key=lambda s: s.frame)
     if len(present) < 2:
         raise TooFewLidarsError(
             f"{opened.path} has scans from {len(present)} LiDAR(s) "
@@ -370,6 +406,8 @@ def _lidars(
                 extrinsic_source=None if T is None else source,
                 scan_pattern=pattern.pattern,
                 scan_pattern_basis=pattern.basis,
+                clock_offset_ns=clocks[s.topic].clock.offset_ns,
+                clock_shift_ns=clocks[s.topic].shift_ns,
             )
         )
     return tuple(lidars), notes

@@ -71,6 +71,8 @@ class Spec:
     """If set, odometry moves `base_footprint`, this far below `base_link` (a tf_static edge)."""
     frame_prefix: str = ""
     """Written before every frame id (`/` as ROS 1 tf used to)."""
+    header_clock_offset_ns: int | Mapping[str, int] = 0
+    """Header stamps = log times + this, for every topic or by topic (see `RecordingWriter`)."""
     seed: int = 7
 
 
@@ -88,8 +90,20 @@ class Truth:
 
 def pose_at(spec: Spec, t: float, *, with_error: bool = False) -> Matrix4:
     """True (or odometry) `T_odom_base` at time `t`: stop k spans [k*(dwell+move), +dwell]."""
+    return _pose_since_start(spec, t - spec.t0, with_error=with_error)
+
+
+def _stamps_ns(spec: Spec, hz: float) -> NDArray[np.int64]:
+    """Stamps every 1/hz from the first stop's start to the last one's end (both included), in
+    integer nanoseconds: float seconds at a wall clock's epoch would round the last one away."""
+    duration_ns = round(((spec.stops - 1) * (spec.dwell_s + spec.move_s) + spec.dwell_s) * NS)
+    period_ns = round(NS / hz)
+    return round(spec.t0 * NS) + np.arange(duration_ns // period_ns + 1) * period_ns
+
+
+def _pose_since_start(spec: Spec, rel: float, *, with_error: bool = False) -> Matrix4:
     cycle = spec.dwell_s + spec.move_s
-    rel = max(t - spec.t0, 0.0)
+    rel = max(rel, 0.0)
     k = min(int(rel // cycle), spec.stops - 1)
     frac = (
         0.0 if rel - k * cycle <= spec.dwell_s else (rel - k * cycle - spec.dwell_s) / spec.move_s
@@ -107,7 +121,6 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
     """Write the recording of `spec` at `path` in `fmt`; return its truth."""
     rng = np.random.default_rng(spec.seed)
     cycle = spec.dwell_s + spec.move_s
-    t_end = spec.t0 + (spec.stops - 1) * cycle + spec.dwell_s
     initial = {name: TRUE_EXTRINSICS[name] @ PERTURBATION for name in spec.lidars}
     n_zero = int(spec.points * spec.zero_fraction)
     n_nan = {
@@ -118,7 +131,7 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
     n_valid = {name: spec.points - n_nan[name] - n_zero for name in spec.lidars}
     f = spec.frame_prefix
     T_footprint_base = from_xyz_rpy([0.0, 0.0, spec.footprint_height or 0.0], [0.0, 0.0, 0.0])
-    with RecordingWriter(path, fmt) as writer:
+    with RecordingWriter(path, fmt, header_clock_offset_ns=spec.header_clock_offset_ns) as writer:
         if spec.tf_static:
             edges = (
                 [(f + "base_link", f + "lidar_front", initial["lidar_front"])]
@@ -135,9 +148,8 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
             if spec.footprint_height is not None:
                 edges.append((f + "base_footprint", f + "base_link", T_footprint_base))
             writer.write_transforms(int(spec.t0 * NS), edges, static=True)
-        for t in np.arange(spec.t0, t_end + 1e-9, 1.0 / spec.odom_hz):
-            stamp = round(float(t) * NS)
-            T = pose_at(spec, t, with_error=True)
+        for stamp in _stamps_ns(spec, spec.odom_hz).tolist():
+            T = _pose_since_start(spec, (stamp - round(spec.t0 * NS)) / NS, with_error=True)
             child = "base_link"
             if spec.footprint_height is not None:
                 T, child = T @ invert(T_footprint_base), "base_footprint"
@@ -147,8 +159,8 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
                 )
             elif spec.trajectory == "tf":
                 writer.write_transforms(stamp, [(f + "odom", f + child, T)])
-        for t in np.arange(spec.t0, t_end + 1e-9, 1.0 / spec.scan_hz):
-            stamp = round(float(t) * NS)
+        for stamp in _stamps_ns(spec, spec.scan_hz).tolist():
+            t = spec.t0 + (stamp - round(spec.t0 * NS)) / NS
             for name in spec.lidars:
                 if name in spec.models:
                     points, beams = _model_scan(spec, spec.models[name], t, rng)
