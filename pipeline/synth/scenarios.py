@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from pipeline.errors import ConfigError
 from pipeline.synth.lidar_models import LidarModel, Mid70, SpinningLidar
-from pipeline.synth.motion import ArcMotion
+from pipeline.synth.motion import ArcMotion, Motion
 from pipeline.synth.perturbation import PerturbationBounds
 from pipeline.synth.scene import ObjectKind, Ring, SceneSpec
 from pipeline.transforms import Matrix4, from_xyz_rpy
@@ -67,7 +67,7 @@ class ScenarioSpec(BaseModel):
     description: str
     lidars: tuple[LidarMount, ...]
     scene: SceneSpec = SceneSpec()
-    motion: ArcMotion = ArcMotion()
+    motion: Motion = ArcMotion()
     extrinsic_error: PerturbationBounds = PerturbationBounds(translation_m=0.2, rotation_deg=5.0)
     odometry_error: PerturbationBounds = PerturbationBounds(translation_m=0.2, rotation_deg=3.0)
     rate_scale: float = Field(default=1.0, gt=0, description="multiplies every LiDAR's point rate")

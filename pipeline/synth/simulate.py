@@ -251,7 +251,7 @@ def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0)
         )
     motion = spec.motion
     objects = place_objects(
-        spec.scene, np.random.default_rng([seed, _SCENE]), (motion.radius_m, motion.radius_m)
+        spec.scene, np.random.default_rng([seed, _SCENE]), motion.radius_band_m()
     )
     true = tuple(mount.T_base_lidar() for mount in spec.lidars)
     scene = build_scene(
