@@ -11,6 +11,7 @@ as such a route.
 
 from __future__ import annotations
 
+import functools
 import math
 from functools import cached_property
 from typing import Annotated, Literal
@@ -96,51 +97,13 @@ class RouteMotion(BaseModel):
         """(stops, 2) start and end of each stop."""
         return self._stop_times.copy()
 
-    @cached_property
-    def _segments(self) -> tuple[Straight | Arc, ...]:
-        return tuple(segment for leg in self.legs for segment in leg)
-
-    @cached_property
+    @property
     def _stop_times(self) -> FloatArray:
-        times = np.zeros((self.stops, 2))
-        t = 0.0
-        for j, dwell in enumerate(self.dwell_s):
-            times[j] = (t, t + dwell)
-            t += dwell + (sum(s.duration_s for s in self.legs[j]) if j < len(self.legs) else 0.0)
-        return times
+        return _timeline(self)[0]
 
-    @cached_property
+    @property
     def _table(self) -> dict[str, FloatArray]:
-        """Per segment: start time, duration, signed radius, angle (rad), distance, start pose."""
-        n = len(self._segments)
-        table = {
-            name: np.zeros(n)
-            for name in ("start", "duration", "radius", "angle", "distance", "x", "y", "yaw")
-        }
-        x, y, yaw = self.start[0], self.start[1], math.radians(self.start[2])
-        k = 0
-        for j, leg in enumerate(self.legs):
-            t = float(self._stop_times[j, 1])
-            for segment in leg:
-                radius = segment.radius_m if isinstance(segment, Arc) else 0.0
-                angle = math.radians(segment.angle_deg) if isinstance(segment, Arc) else 0.0
-                distance = segment.distance_m if isinstance(segment, Straight) else 0.0
-                for name, value in (
-                    ("start", t),
-                    ("duration", segment.duration_s),
-                    ("radius", radius),
-                    ("angle", angle),
-                    ("distance", distance),
-                    ("x", x),
-                    ("y", y),
-                    ("yaw", yaw),
-                ):
-                    table[name][k] = value
-                end = _advance(x, y, yaw, distance, radius, angle, 1.0)
-                x, y, yaw = float(end[0]), float(end[1]), float(end[2])
-                t += segment.duration_s
-                k += 1
-        return table
+        return _timeline(self)[1]
 
     def _at(self, t: FloatArray) -> tuple[dict[str, FloatArray], FloatArray, FloatArray]:
         """The segment each time falls in (or last finished), its progress `s` and `ds/dt`."""
@@ -226,6 +189,47 @@ class RouteMotion(BaseModel):
             per_leg.append(float(per_segment[k : k + len(leg)].sum()))
             k += len(leg)
         return np.cumsum(per_leg)
+
+
+@functools.lru_cache(maxsize=32)
+def _timeline(route: RouteMotion) -> tuple[FloatArray, dict[str, FloatArray]]:
+    """(stops, 2) start and end of each stop; per segment: start time, duration, signed radius,
+    angle (rad), distance and start pose. Cached per route (a frozen, hashable model) rather
+    than on it, so that two equal routes still compare equal (pydantic compares `__dict__`)."""
+    stop_times = np.zeros((route.stops, 2))
+    t = 0.0
+    for j, dwell in enumerate(route.dwell_s):
+        stop_times[j] = (t, t + dwell)
+        t += dwell + (sum(s.duration_s for s in route.legs[j]) if j < len(route.legs) else 0.0)
+    n = sum(len(leg) for leg in route.legs)
+    table = {
+        name: np.zeros(n)
+        for name in ("start", "duration", "radius", "angle", "distance", "x", "y", "yaw")
+    }
+    x, y, yaw = route.start[0], route.start[1], math.radians(route.start[2])
+    k = 0
+    for j, leg in enumerate(route.legs):
+        t = float(stop_times[j, 1])
+        for segment in leg:
+            radius = segment.radius_m if isinstance(segment, Arc) else 0.0
+            angle = math.radians(segment.angle_deg) if isinstance(segment, Arc) else 0.0
+            distance = segment.distance_m if isinstance(segment, Straight) else 0.0
+            for name, value in (
+                ("start", t),
+                ("duration", segment.duration_s),
+                ("radius", radius),
+                ("angle", angle),
+                ("distance", distance),
+                ("x", x),
+                ("y", y),
+                ("yaw", yaw),
+            ):
+                table[name][k] = value
+            end = _advance(x, y, yaw, distance, radius, angle, 1.0)
+            x, y, yaw = float(end[0]), float(end[1]), float(end[2])
+            t += segment.duration_s
+            k += 1
+    return stop_times, table
 
 
 def _advance(
