@@ -21,7 +21,7 @@ from pipeline.errors import ConfigError
 from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, Stop
 from pipeline.synth.lidar_models import LidarModel
 from pipeline.synth.motion import interpolate_drift
-from pipeline.synth.perturbation import random_perturbation
+from pipeline.synth.perturbation import drift_errors, random_perturbation
 from pipeline.synth.raycast import cast_with_footprint
 from pipeline.synth.scenarios import ScenarioSpec, get_scenario
 from pipeline.synth.scene import Scene, build_scene, place_objects
@@ -34,7 +34,7 @@ PoseFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
 _NS = 1_000_000_000
 _MAX_INTENSITY = 255.0
 # Stream ids that keep the random draws of one concern independent of the others.
-_SCENE, _SCAN, _EXTRINSICS, _ODOMETRY = 0, 1, 2, 3
+_SCENE, _SCAN, _EXTRINSICS, _ODOMETRY, _DRIFT = 0, 1, 2, 3, 4
 
 
 @dataclass(frozen=True)
@@ -238,6 +238,8 @@ class World:
             ),
             objects=self.scene.objects,
             labels=labels or {},
+            scenario_class=self.spec.scenario_class,
+            spec=self.spec.model_dump(mode="json"),
         )
 
 
@@ -251,7 +253,7 @@ def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0)
         )
     motion = spec.motion
     objects = place_objects(
-        spec.scene, np.random.default_rng([seed, _SCENE]), (motion.radius_m, motion.radius_m)
+        spec.scene, np.random.default_rng([seed, _SCENE]), motion.radius_band_m()
     )
     true = tuple(mount.T_base_lidar() for mount in spec.lidars)
     scene = build_scene(
@@ -261,6 +263,10 @@ def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0)
     initial = tuple(T @ random_perturbation(rng, spec.extrinsic_error) for T in true)
     rng = np.random.default_rng([seed, _ODOMETRY])
     errors = np.stack([random_perturbation(rng, spec.odometry_error) for _ in range(motion.stops)])
+    travel = motion.travel_m(half_track_m=spec.scene.robot_size_m[1] / 2.0)
+    fractions = travel / travel[-1] if travel[-1] > 0 else np.zeros_like(travel)
+    drift = drift_errors(np.random.default_rng([seed, _DRIFT]), spec.odometry_drift, fractions)
+    errors = drift @ errors
     return World(
         spec=spec,
         seed=seed,
