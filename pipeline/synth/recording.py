@@ -16,7 +16,6 @@ import tarfile
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -105,28 +104,7 @@ def archive_recording(out: Path, archive: Path) -> Path:
 
 def _writer(path: Path, fmt: WriterFormat, offsets: Mapping[str, int]) -> RecordingWriter:
     """A writer whose header stamps are the log time plus the topic's offset in `offsets`."""
-    return _HeaderClockWriter(path, fmt, offsets) if offsets else RecordingWriter(path, fmt)
-
-
-class _HeaderClockWriter(RecordingWriter):
-    """STAND-IN, to be replaced by the writer's own `header_clock_offset_ns` (being added to
-    `pipeline.io.writer` by another change): then `_writer` passes `offsets` to
-    `RecordingWriter` and this class goes. It moves each message's header stamp by its topic's
-    offset and leaves the bag's log time where it was."""
-
-    def __init__(self, path: Path, fmt: WriterFormat, offsets: Mapping[str, int]) -> None:
-        super().__init__(path, fmt)
-        self._offsets = dict(offsets)
-
-    def _write(self, topic: str, msgtype: str, stamp_ns: int, msg: Any) -> None:
-        offset = self._offsets.get(topic, 0)
-        if offset and hasattr(msg, "header"):
-            shifted = stamp_ns + offset
-            stamp = self.types["builtin_interfaces/msg/Time"](
-                sec=shifted // _NS, nanosec=shifted % _NS
-            )
-            msg = dataclasses.replace(msg, header=dataclasses.replace(msg.header, stamp=stamp))
-        super()._write(topic, msgtype, stamp_ns, msg)
+    return RecordingWriter(path, fmt, header_clock_offset_ns=offsets)
 
 
 def _static_edges(world: World) -> list[tuple[str, str, Matrix4]]:

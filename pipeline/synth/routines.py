@@ -63,7 +63,8 @@ def side_stops(side_m: float, spacing_m: float) -> int:
 
 
 def loop_stop_count(sides_m: tuple[float, float], spacing_m: float) -> int:
-    return 2 * (side_stops(sides_m[0], spacing_m) + side_stops(sides_m[1], spacing_m)) + 1
+    """Stops along the four sides, the start, and one more at each of the three corners turned."""
+    return 2 * (side_stops(sides_m[0], spacing_m) + side_stops(sides_m[1], spacing_m)) + 4
 
 
 def loop(
@@ -75,14 +76,19 @@ def loop(
 ) -> RouteMotion:
     """A rectangular loop (a square when both sides are equal) back to its start: straight
     drives with stops at most `spacing_m` apart, a stop at every corner, and a 90 deg turn on the
-    spot at each corner before the next side (to the left, or to the right with `left=False`)."""
+    spot at each corner before the next side (to the left, or to the right with `left=False`).
+
+    A turn is a leg of its own, between two stops at the corner: a base that ends a drive at
+    rest, turns and sets off again stands still at both ends of the turn, and a stop detector
+    finds those rests whether or not the routine means them as stops."""
     turn = speeds.arc(90.0 if left else -90.0)
     legs: list[tuple[Segment, ...]] = []
     for side in range(4):
         length = sides_m[side % 2]
         count = side_stops(length, spacing_m)
-        drive = speeds.straight(length / count)
-        legs += [(turn, drive) if side and not k else (drive,) for k in range(count)]
+        if side:
+            legs.append((turn,))
+        legs += [(speeds.straight(length / count),)] * count
     return _route(dwell_s, legs, "loop")
 
 

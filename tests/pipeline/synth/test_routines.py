@@ -59,7 +59,7 @@ def test_loop_stops_at_corners_and_along_the_sides(left: bool) -> None:
     sides, spacing = (3.0, 1.2), 1.0
     count = loop_stop_count(sides, spacing)
     motion = loop(sides, spacing, [0.6] * count, SPEEDS, left=left)
-    assert motion.stops == count == 2 * (3 + 2) + 1
+    assert motion.stops == count == 2 * (3 + 2) + 1 + 3
     xy, yaw = _stop_xy_yaw(motion)
     sign = 1.0 if left else -1.0
     corners = np.array([[0, 0], [3.0, 0], [3.0, sign * 1.2], [0, sign * 1.2]])
@@ -103,7 +103,7 @@ def test_moves_take_as_long_as_the_speed_limits_allow() -> None:
 
 
 def test_a_dwell_per_stop_is_required() -> None:
-    with pytest.raises(ConfigError, match=r"loop routine has 11 stops but 3 dwell times"):
+    with pytest.raises(ConfigError, match=r"loop routine has 14 stops but 3 dwell times"):
         loop((3.0, 1.2), 1.0, [1.0] * 3, SPEEDS)
 
 
