@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO, Protocol, cast
 from urllib.parse import unquote, urlsplit
 
-from service.settings import Settings
+from service.settings import Settings, check_storage_url
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
@@ -82,25 +82,22 @@ def validate_key(key: str) -> str:
 def make_storage(settings: Settings) -> Storage:
     """The storage `settings.resolved_storage_url` names (`file://` or `s3://`)."""
     url = settings.resolved_storage_url
+    check_storage_url(url)
     parts = urlsplit(url)
     if parts.scheme == "file":
         return LocalStorage(Path(unquote(parts.path)))
-    if parts.scheme == "s3":
-        if not parts.netloc:
-            raise ValueError(f"storage URL {url!r} names no bucket: use s3://bucket[/prefix]")
-        import boto3  # heavy: only when S3 is configured
-        from botocore.config import Config
+    import boto3  # heavy: only when S3 is configured
+    from botocore.config import Config
 
-        client = boto3.client(
-            "s3",
-            endpoint_url=settings.s3_endpoint_url,
-            region_name=settings.s3_region,
-            config=Config(retries={"max_attempts": 5, "mode": "standard"}),
-        )
-        return S3Storage(
-            client, parts.netloc, parts.path.strip("/"), part_size=settings.s3_part_size_bytes
-        )
-    raise ValueError(f"unsupported storage URL {url!r}: use file:///dir or s3://bucket[/prefix]")
+    client = boto3.client(
+        "s3",
+        endpoint_url=settings.s3_endpoint_url,
+        region_name=settings.s3_region,
+        config=Config(retries={"max_attempts": 5, "mode": "standard"}),
+    )
+    return S3Storage(
+        client, parts.netloc, parts.path.strip("/"), part_size=settings.s3_part_size_bytes
+    )
 
 
 # -- local directory ------------------------------------------------------------------------------
