@@ -76,8 +76,9 @@ class Settings(BaseSettings):
     )
     stale_upload_seconds: PositiveInt = Field(
         default=6 * 3600,
-        description="Temporary uploads untouched for this long are left-overs of a killed process "
-        "and are removed at start.",
+        description="At start, S3 multipart uploads begun this long ago are taken for left-overs "
+        "of a killed process and aborted (other API processes may be uploading). Local partial "
+        "uploads go at once when no process holds their lock, locked ones after this long.",
     )
 
     @field_validator("database_url", "storage_url", "s3_endpoint_url", mode="before")

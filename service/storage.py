@@ -1,13 +1,15 @@
 """Object storage for recordings behind one interface: a local directory (default) or an
 S3-compatible bucket. Uploads are written aside and become visible only on `commit`.
 
-Local: a temporary file under `.tmp/`, fsynced and renamed into place. S3: a multipart upload that
-is completed on commit (its parts are invisible until then) or aborted; small objects are one PUT.
+Local: a temporary file under `.tmp/`, locked by its writer, fsynced and renamed into place. S3:
+a multipart upload that is completed on commit (its parts are invisible until then) or aborted;
+small objects are one PUT.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import re
 import shutil
@@ -146,13 +148,21 @@ class LocalStorage:
             raise StorageError(f"cannot write to {self._tmp}: {err.strerror}") from err
 
     def sweep_stale_uploads(self, older_than: timedelta) -> int:
+        """Remove the uploads no process is writing (their writer holds a lock on the file, which
+        the system drops when the process dies, however it dies), at any age; and, as before,
+        those still locked but untouched for `older_than` (a writer hung that long). Safe with
+        several API processes on one storage directory: another process's upload stays locked."""
         cutoff = time.time() - older_than.total_seconds()
         removed = 0
         for part in self._tmp.glob("*.part"):
             with contextlib.suppress(FileNotFoundError):
-                if part.stat().st_mtime < cutoff:
+                if not _locked(part) or part.stat().st_mtime < cutoff:
                     part.unlink()
                     removed += 1
+        for creating in self._tmp.glob("*.creating"):  # a writer killed between two calls
+            with contextlib.suppress(FileNotFoundError):
+                if creating.stat().st_mtime < cutoff:
+                    creating.unlink()
         return removed
 
     def keys_older_than(self, prefix: str, older_than: timedelta) -> Iterator[str]:
@@ -172,11 +182,22 @@ class _LocalUpload:
     def __init__(self, storage: LocalStorage, key: str) -> None:
         self.key = key
         self._final = storage.path(key)
-        self._part = storage._tmp / f"{uuid.uuid4().hex}.part"
+        name = uuid.uuid4().hex
+        self._part = storage._tmp / f"{name}.part"
+        # Locked before it is named `.part`, so that a sweep never finds it unlocked while alive.
+        creating = storage._tmp / f"{name}.creating"
         try:
-            self._file: BinaryIO | None = self._part.open("xb")
+            file = creating.open("xb")
         except OSError as err:
             raise _os_error(err, f"cannot create {self._part}") from err
+        try:
+            fcntl.flock(file.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            os.replace(creating, self._part)
+        except OSError as err:
+            file.close()
+            creating.unlink(missing_ok=True)
+            raise _os_error(err, f"cannot create {self._part}") from err
+        self._file: BinaryIO | None = file
 
     def write(self, data: bytes) -> None:
         if self._file is None:
@@ -195,9 +216,10 @@ class _LocalUpload:
             file.flush()
             # Durable before visible: a crash after the run is recorded must not lose the bytes.
             os.fsync(file.fileno())
-            file.close()
             self._final.parent.mkdir(parents=True, exist_ok=True)
+            # Renamed while still open (so still locked): a sweep never sees it unlocked.
             os.replace(self._part, self._final)
+            file.close()
             _fsync_dir(self._final.parent)
         except OSError as err:
             file.close()
@@ -210,6 +232,18 @@ class _LocalUpload:
             with contextlib.suppress(OSError):
                 file.close()
         self._part.unlink(missing_ok=True)
+
+
+def _locked(path: Path) -> bool:
+    """Whether a process holds the lock on `path` (a `_LocalUpload` being written)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)  # closing drops the lock this probe may have taken
+    return False
 
 
 def _fsync_dir(path: Path) -> None:
