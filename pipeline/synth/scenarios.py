@@ -18,6 +18,7 @@ from pipeline.synth.lidar_models import LidarModel, Mid70, SpinningLidar
 from pipeline.synth.motion import ArcMotion
 from pipeline.synth.perturbation import PerturbationBounds
 from pipeline.synth.scene import ObjectKind, Ring, SceneSpec
+from pipeline.synth.world_scenarios import world_scenarios
 from pipeline.transforms import Matrix4, from_xyz_rpy
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
@@ -211,6 +212,7 @@ def _registry() -> dict[str, ScenarioSpec]:
             }
         )
     )
+    specs += world_scenarios(_set1(kinds, "set1-mixed", ""))
     tiny_mid70 = Mid70(max_range_m=12.0)
     specs.append(
         ScenarioSpec(
