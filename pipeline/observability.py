@@ -10,12 +10,13 @@ by name instead of smeared over all six. The reference LiDAR is the datum: its s
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from pipeline.optimisation import ParameterLayout
+from pipeline.optimisation import OptimisationResult
 from pipeline.rough_refinement import adjoint
 from pipeline.transforms import Matrix4, make_transform
 
@@ -24,26 +25,26 @@ DOF_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
 
 class ObservabilityConfig(BaseModel):
     """A weak prior (what "we know nothing" means) makes the covariance finite; a DoF whose
-    posterior stddev stays above `undetermined_fraction` of the prior was not fixed by the data.
+    formal posterior stddev stays above `undetermined_fraction` of the prior was not fixed by the
+    data.
 
     The formal covariance treats every residual as independent. They are not: neighbouring object
     points share their local surface fit and its small bias, which the optimiser cannot average
-    away, so the true error is several times the formal 1-sigma. The reported stddev are the
-    formal ones times `stddev_scale_*`, measured on the calibration benchmark (full rate, 8 cases x
-    10 seeds, 140 LiDAR-trials): the RMS of |true error| / |formal 1-sigma| was 6.9 for
-    translation (4.8-7.9 per case) and 3.1 for rotation (2.4-4.0). `bench_calibration` prints the
-    ratio for the reported stddev (about 1 when these factors fit)."""
+    away, so the true error is several times the formal 1-sigma. The reported 1-sigma is therefore
+    measured on the recording itself: a leave-one-stop-out jackknife (`jackknife`), the spread
+    of the solutions the data give without each stop in turn, never smaller than the formal one.
+    """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     prior_translation_m: float = Field(default=1.0, gt=0)
     prior_rotation_deg: float = Field(default=30.0, gt=0)
     undetermined_fraction: float = Field(default=0.5, gt=0, lt=1)
-    stddev_scale_translation: float = Field(
-        default=7.0, ge=1.0, description="reported translation stddev over the formal one"
-    )
-    stddev_scale_rotation: float = Field(
-        default=3.0, ge=1.0, description="reported rotation stddev over the formal one"
+    method: Literal["jackknife", "formal"] = Field(
+        default="jackknife",
+        description="jackknife: leave-one-stop-out spread (needs three stops or more, else "
+        "formal); formal: the inverse information alone, which the correlated residuals of a "
+        "surface patch make several times too small",
     )
 
 
@@ -70,30 +71,72 @@ def level_rotation(up_base: NDArray[np.float64]) -> NDArray[np.float64]:
     return result
 
 
+def _prior(layout_size: int, config: ObservabilityConfig) -> NDArray[np.float64]:
+    """The weak prior's information per parameter (P,): twists `[rho, phi]` per pose."""
+    per_pose = [1.0 / config.prior_translation_m**2] * 3 + [
+        1.0 / np.radians(config.prior_rotation_deg) ** 2
+    ] * 3
+    return np.tile(per_pose, layout_size // 6)
+
+
+def jackknife_covariance(
+    result: OptimisationResult, prior: NDArray[np.float64]
+) -> NDArray[np.float64] | None:
+    """Leave-one-stop-out covariance (P, P) of the parameters, linearised at the solution.
+
+    Without stop j the cost keeps every residual but those touching j: one Gauss-Newton step
+    from the solution with `H - H_j` and `b - b_j` gives that solution's offset `d_j`; the
+    jackknife covariance is `(n - 1) / n * sum_j (d_j - mean)(d_j - mean)^T` over the n stops
+    with data. None with fewer than three such stops.
+    """
+    size = result.layout.size
+    H, b = result.information, result.gradient
+    used = [
+        j
+        for j in range(result.layout.n_stops)
+        if np.any(result.stop_information[j]) or np.any(result.stop_gradient[j])
+    ]
+    if len(used) < 3 or size == 0:
+        return None
+    offsets = np.empty((len(used), size))
+    for row, j in enumerate(used):
+        A = H - result.stop_information[j] + np.diag(prior)
+        offsets[row] = -np.linalg.solve(A, b - result.stop_gradient[j])
+    centred = offsets - offsets.mean(axis=0)
+    n = len(used)
+    covariance: NDArray[np.float64] = (n - 1) / n * (centred.T @ centred)
+    return covariance
+
+
+def _stddev(
+    covariance: NDArray[np.float64], col: int, A: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """1-sigma (6,) of the pose whose twist starts at column `col`, in the axes of `A` (6, 6)."""
+    block = covariance[col : col + 6, col : col + 6]
+    result: NDArray[np.float64] = np.sqrt(np.clip(np.diag(A @ block @ A.T), 0.0, None))
+    return result
+
+
 def pose_uncertainties(
-    information: NDArray[np.float64],
-    variance_factor: float,
-    layout: ParameterLayout,
+    result: OptimisationResult,
     T_base_ref: Matrix4,
-    T_ref_lidar: NDArray[np.float64],
     up_ref: NDArray[np.float64] | None,
     config: ObservabilityConfig,
 ) -> tuple[PoseUncertainty, ...]:
-    """Per LiDAR (reference first), from stage 4's `information` (P, P) = J^T W J.
+    """Per LiDAR (reference first), from stage 4's result.
 
-    The data's information is rescaled by the a-posteriori `variance_factor`, the weak prior is
-    added, and each LiDAR's 6x6 block of the inverse is turned from the optimiser's twist (in the
-    reference frame) into the level-base axes through the LiDAR's origin. `up_ref` (3,): the floor
-    normal in the reference LiDAR's frame (None: use the base frame's axes as they are). The
-    undetermined DoF are judged on the formal stddev, which are then scaled (see the config).
+    Formal: the information `J^T W J` rescaled by the a-posteriori variance factor, plus the weak
+    prior, inverted. Reported: the jackknife's covariance (`config.method`), never below the
+    formal one. Each LiDAR's 6x6 block is turned from the optimiser's twist (in the reference
+    frame) into the level-base axes through the LiDAR's origin. `up_ref` (3,): the floor normal
+    in the reference LiDAR's frame (None: use the base frame's axes as they are). The undetermined
+    DoF are judged on the formal stddev.
     """
-    prior = np.tile(
-        [1.0 / config.prior_translation_m**2] * 3
-        + [1.0 / np.radians(config.prior_rotation_deg) ** 2] * 3,
-        layout.size // 6,
-    )
-    scale = 1.0 / max(variance_factor, 1e-12)
-    covariance = np.linalg.inv(information * scale + np.diag(prior))
+    layout = result.layout
+    prior = _prior(layout.size, config)
+    scale = 1.0 / max(result.variance_factor, 1e-12)
+    formal = np.asarray(np.linalg.inv(result.information * scale + np.diag(prior)), np.float64)
+    measured = jackknife_covariance(result, prior) if config.method == "jackknife" else None
     R_level_base = np.eye(3) if up_ref is None else level_rotation(T_base_ref[:3, :3] @ up_ref)
     T_level_ref = make_transform(R_level_base, np.zeros(3)) @ T_base_ref
     limits = (
@@ -103,23 +146,19 @@ def pose_uncertainties(
     results = [PoseUncertainty(np.zeros(3), np.zeros(3), ())]
     for lidar in range(1, layout.n_lidars):
         col = layout.lidar(lidar)
-        block = covariance[col : col + 6, col : col + 6]
-        t = (T_level_ref @ T_ref_lidar[lidar])[:3, 3]
+        t = (T_level_ref @ result.T_ref_lidar[lidar])[:3, 3]
         # A twist about the level frame's origin moves the LiDAR's origin by rho + phi x t.
         about_origin = np.eye(6)
         about_origin[:3, 3:] = -np.array(
             [[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]]
         )
         A = about_origin @ adjoint(T_level_ref)
-        stddev = np.sqrt(np.clip(np.diag(A @ block @ A.T), 0.0, None))
+
+        stddev = _stddev(formal, col, A)
         undetermined = tuple(
             name for name, s, lim in zip(DOF_NAMES, stddev, limits, strict=True) if s > lim
         )
-        results.append(
-            PoseUncertainty(
-                stddev[:3] * config.stddev_scale_translation,
-                np.degrees(stddev[3:]) * config.stddev_scale_rotation,
-                undetermined,
-            )
-        )
+        if measured is not None:
+            stddev = np.maximum(stddev, _stddev(measured, col, A))
+        results.append(PoseUncertainty(stddev[:3], np.degrees(stddev[3:]), undetermined))
     return tuple(results)

@@ -145,7 +145,10 @@ class OptimisationResult:
     `error_per_iteration[k]`: eq. 11 before step k (mean nearest-neighbour distance, metres, of
     the non-reference object points to the reference map), the last entry after the final step.
     `T_ref_lidar_per_iteration` (K + 1, L, 4, 4): the extrinsics before each step and at the end.
-    `information` (P, P): J^T W J at the solution, weights in 1/sigma^2 (see `layout`);
+    `information` (P, P): J^T W J at the solution, weights in 1/sigma^2 (see `layout`), and
+    `gradient` (P,) J^T W r there; `stop_information` (J, P, P) and `stop_gradient` (J, P): the
+    parts of both that come from the residuals touching each stop (its points as source or as
+    target, its floor planes), for a leave-one-stop-out jackknife (`observability`);
     `variance_factor`: a-posteriori sum of weighted squared residuals over the redundancy.
     """
 
@@ -156,6 +159,9 @@ class OptimisationResult:
     error_per_iteration: tuple[float, ...]
     T_ref_lidar_per_iteration: NDArray[np.float64]
     information: NDArray[np.float64]
+    gradient: NDArray[np.float64]
+    stop_information: NDArray[np.float64]
+    stop_gradient: NDArray[np.float64]
     variance_factor: float
     layout: ParameterLayout
     correspondences: tuple[int, ...]
@@ -485,9 +491,11 @@ class _Problem:
         scale: float,
         *,
         ideal_floor: bool = False,
+        floor_stop: int | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, int]:
         """H = J^T W J, b = J^T W r (weights in 1/sigma^2), the weighted squared residual sum
-        and the number of residual rows. `ideal_floor`: see `_floor_terms`."""
+        and the number of residual rows. `ideal_floor`: see `_floor_terms`; `floor_stop`: only
+        that stop's floor terms (None: every stop's)."""
         layout = self.layout
         H = np.zeros((layout.size, layout.size))
         b = np.zeros(layout.size)
@@ -573,6 +581,9 @@ class _Problem:
             floor_residual, floor_jac = self._floor_terms(
                 T_G_ref, T_ref_lidar, jacobians=True, ideal=ideal_floor
             )
+            if floor_stop is not None:
+                rows = np.array([stop == floor_stop for _, stop, _ in self.floor])
+                floor_residual, floor_jac = floor_residual[rows], floor_jac[rows]
             H += np.einsum("kri,krj->ij", floor_jac, floor_jac)
             b += np.einsum("kri,kr->i", floor_jac, floor_residual)
             chi2 += float(np.sum(floor_residual**2))
@@ -674,9 +685,13 @@ def optimise(
     errors.append(pairs.cross_error)
     # The information matrix and the variance factor at the solution, with its associations.
     H = np.zeros((layout.size, layout.size))
+    gradient = np.zeros(layout.size)
     chi2, count = 0.0, 0
     if len(pairs.source) or problem.floor:
-        H, _, chi2, count = problem.normal_equations(pairs, stops, lidars, scale, ideal_floor=True)
+        H, gradient, chi2, count = problem.normal_equations(
+            pairs, stops, lidars, scale, ideal_floor=True
+        )
+    stop_H, stop_b = _stop_contributions(problem, pairs, stops, lidars, scale)
     redundancy = max(count - layout.size, 1)
     residual_rms = float("nan")
     if len(pairs.source):
@@ -691,12 +706,43 @@ def optimise(
         error_per_iteration=tuple(errors),
         T_ref_lidar_per_iteration=np.stack(history),
         information=H,
+        gradient=gradient,
+        stop_information=stop_H,
+        stop_gradient=stop_b,
         variance_factor=chi2 / redundancy,
         layout=layout,
         correspondences=tuple(int(c) for c in per_lidar),
         residual_rms_m=residual_rms,
         seconds=time.perf_counter() - started,
     )
+
+
+def _stop_contributions(
+    problem: _Problem,
+    pairs: _Pairs,
+    stops: NDArray[np.float64],
+    lidars: NDArray[np.float64],
+    scale: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per stop, the information (J, P, P) and gradient (J, P) of the residuals that touch it.
+
+    A pair touches stop j when its source or its target point was seen there; a pair between two
+    stops counts for both, as leaving either out removes it.
+    """
+    layout = problem.layout
+    H = np.zeros((layout.n_stops, layout.size, layout.size))
+    b = np.zeros((layout.n_stops, layout.size))
+    source_stop = problem.sources.stop[pairs.source]
+    target_stop = problem.reference.stop[pairs.target]
+    for j in range(layout.n_stops):
+        touching = (source_stop == j) | (target_stop == j)
+        if not touching.any() and not any(stop == j for _, stop, _ in problem.floor):
+            continue
+        subset = _Pairs(pairs.source[touching], pairs.target[touching], pairs.cross_error)
+        H[j], b[j], _, _ = problem.normal_equations(
+            subset, stops, lidars, scale, ideal_floor=True, floor_stop=j
+        )
+    return H, b
 
 
 def _step(

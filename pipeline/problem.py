@@ -26,6 +26,9 @@ class ScanPattern(enum.StrEnum):
     REPETITIVE = "repetitive"
     """Every scan re-fires the same directions (spinning multi-beam: Velodyne, Ouster, Hesai):
     accumulated, the points pile up along each beam, on scan lines a few degrees apart."""
+    UNKNOWN = "unknown"
+    """Neither the PointCloud2's fields nor its points tell (too few scans or points, or a
+    recurrence of directions in between): stage 1 leaves such a LiDAR unfiltered."""
 
 
 @dataclass(frozen=True)
@@ -34,8 +37,9 @@ class LidarInfo:
 
     `T_base_lidar` is the *initial* extrinsic (tf_static or config), (4, 4) float64.
     `points_per_second` is the mean rate over the recording (all scans, not only stops).
-    `scan_pattern`: repetitive when its PointCloud2 carries a `ring` field (the beam index that
-    spinning LiDARs' drivers publish), else non-repetitive.
+    `scan_pattern`: from its PointCloud2's beam-index field (`ring`, `channel`, `laser_id`:
+    repetitive; Livox's `line`/`tag`: non-repetitive), else judged from its points
+    (`pipeline.io.scan_pattern`); UNKNOWN when neither tells.
     """
 
     frame: str

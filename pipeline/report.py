@@ -3,7 +3,10 @@ after calibration, each LiDAR in its own colour, and the error per optimisation 
 
 Both maps are drawn in W, the base frame at the first stop: before with the odometry's stop poses
 and the initial extrinsics, after with the refined poses and the calibrated extrinsics. The same
-points enter both (the floor is hidden from above, where it would only cover the objects).
+points enter both (the floor is hidden from above, where it would only cover the objects). The
+view is where the robot was: around its path, as far as its LiDARs reach, so that a calibration
+that diverged (points thrown tens of metres away) cannot shrink the robot's surroundings to a dot;
+the after panel then says how many points fell outside.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ _DPI = 100
 _TOP_PIXELS = 560
 _SIDE_COLS, _SIDE_ROWS = 1200, 220
 _MIN_CELL_M = 0.02
+_WARNING_COLOUR = "#B23A00"
 
 
 def lidar_colour(index: int) -> str:
@@ -148,20 +152,98 @@ def render_report(
 
 def render(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[str, bytes]:
     """The PNG images `names` (of `REPORT_IMAGES`) for `data`, by name."""
+    return {name: _png(figure) for name, figure in figures(data, names).items()}
+
+
+def figures(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[str, Figure]:
+    """The matplotlib figures of `render`, by name, in `REPORT_IMAGES` order."""
     unknown = sorted(set(names) - set(REPORT_IMAGES))
     if unknown:
         raise ValueError(f"no report image {unknown}; the images are {list(REPORT_IMAGES)}")
-    before, after = data.placed(after=False), data.placed(after=True)
-    floor_z = floor_height(np.concatenate(after)) if any(len(p) for p in after) else 0.0
-    # One classification for both maps (from the calibrated one), so both show the same points.
-    objects = [p[:, 2] > floor_z + _OBJECT_MIN_HEIGHT_M for p in after]
-    x0, x1, _, _ = _top_extent([p[m, :2] for p, m in zip(after, objects, strict=True)])
-    figures = {
-        "map-top": lambda: _top_view(data, before, after, objects),
-        "map-side": lambda: _side_view(data, before, after, (x0, x1), floor_z),
+    maps = _Maps.of(data)
+    make = {
+        "map-top": lambda: _top_view(data, maps),
+        "map-side": lambda: _side_view(data, maps),
         "error": lambda: _error_curve(data),
     }
-    return {name: _png(figures[name]()) for name in REPORT_IMAGES if name in names}
+    return {name: make[name]() for name in REPORT_IMAGES if name in names}
+
+
+@dataclass(frozen=True)
+class _Maps:
+    """Both maps' points in W (per LiDAR), which of them are objects (one classification, from
+    the calibrated map, so both show the same points), the floor height, the robot's
+    surroundings and the top view."""
+
+    before: list[Points]
+    after: list[Points]
+    objects: list[NDArray[np.bool_]]
+    floor_z: float
+    surroundings: Extent
+    extent: Extent
+
+    @classmethod
+    def of(cls, data: ReportInput) -> _Maps:
+        before, after = data.placed(after=False), data.placed(after=True)
+        floor_z = floor_height(np.concatenate(after)) if any(len(p) for p in after) else 0.0
+        objects = [p[:, 2] > floor_z + _OBJECT_MIN_HEIGHT_M for p in after]
+        window = robot_surroundings(data)
+        extent = _map_extent(window, before, after, objects)
+        return cls(before, after, objects, floor_z, window, extent)
+
+
+def robot_surroundings(data: ReportInput) -> Extent:
+    """Where the maps can hold anything real: the box around the robot's path (each LiDAR's
+    origin at each stop, placed by the odometry and the initial extrinsics, never far off) grown
+    by the LiDARs' reach (the 99th percentile of the points' range in their own frames, which no
+    pose can change)."""
+    origins = data.T_W_lidar_before[:, :, :2, 3].reshape(-1, 2)
+    ranges = [np.linalg.norm(cloud, axis=1) for row in data.clouds for cloud in row if len(cloud)]
+    reach = float(np.percentile(np.concatenate(ranges), 99)) if ranges else 5.0
+    low, high = origins.min(axis=0) - reach, origins.max(axis=0) + reach
+    return (float(low[0]), float(high[0]), float(low[1]), float(high[1]))
+
+
+def map_extent(data: ReportInput) -> Extent:
+    """The top view's square (x0, x1, y0, y1), metres in W: around the dense objects of both
+    maps within `robot_surroundings`. Points a failed calibration threw further away are left
+    out, not allowed to widen the view (the panel counts those outside the surroundings)."""
+    return _Maps.of(data).extent
+
+
+def _map_extent(
+    window: Extent,
+    before: list[Points],
+    after: list[Points],
+    objects: list[NDArray[np.bool_]],
+) -> Extent:
+    shown = [
+        placed[mask, :2][_inside(placed[mask, :2], window)]
+        for maps in (before, after)
+        for placed, mask in zip(maps, objects, strict=True)
+    ]
+    x0, x1, y0, y1 = _top_extent(shown)
+    return _square(max(x0, window[0]), min(x1, window[1]), max(y0, window[2]), min(y1, window[3]))
+
+
+def points_outside(points: Sequence[Points], extent: Extent) -> tuple[float, float]:
+    """The share of the (N, 3) `points` whose x, y fall outside `extent` (a box), and how far
+    the farthest of them lies from it (m)."""
+    xy = np.concatenate([p[:, :2] for p in points if len(p)] or [np.zeros((0, 2))])
+    if not len(xy):
+        return 0.0, 0.0
+    low = np.array([extent[0], extent[2]])
+    high = np.array([extent[1], extent[3]])
+    distance = np.linalg.norm(np.maximum(0.0, np.maximum(low - xy, xy - high)), axis=1)
+    return float(np.mean(distance > 0)), float(distance.max())
+
+
+def _inside(xy: NDArray[np.float64], extent: Extent) -> NDArray[np.bool_]:
+    x0, x1, y0, y1 = extent
+    inside: NDArray[np.bool_] = (
+        (xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)
+    )
+    return inside
 
 
 def floor_height(points: Points, bin_m: float = 0.01) -> float:
@@ -293,29 +375,52 @@ def _panel_titles(data: ReportInput) -> tuple[str, str]:
     )
 
 
-def _top_extent(after_objects: Sequence[NDArray[np.float64]]) -> Extent:
-    """A square around the calibrated map's objects."""
-    points = np.concatenate([p for p in after_objects if len(p)] or [np.zeros((0, 2))])
-    x0, x1, y0, y1 = _dense_extent(points, cell_m=0.1, margin_m=0.5, fallback=(-5, 5, -5, 5))
+def _top_extent(objects_xy: Sequence[NDArray[np.float64]]) -> Extent:
+    """The box around where (N, 2) object points are dense."""
+    points = np.concatenate([p for p in objects_xy if len(p)] or [np.zeros((0, 2))])
+    return _dense_extent(points, cell_m=0.1, margin_m=0.5, fallback=(-5, 5, -5, 5))
+
+
+def _square(x0: float, x1: float, y0: float, y1: float) -> Extent:
     half = max(x1 - x0, y1 - y0) / 2
     cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
     return (cx - half, cx + half, cy - half, cy + half)
 
 
-def _top_view(
-    data: ReportInput, before: list[Points], after: list[Points], objects: list[NDArray[np.bool_]]
-) -> Figure:
+def _outside_note(axes: Axes, placed: Sequence[Points], surroundings: Extent) -> None:
+    """Say so when more points than the LiDARs' stray far returns (1 %) lie beyond the robot's
+    surroundings: the poses threw them there, and the view does not follow them."""
+    share, farthest = points_outside(placed, surroundings)
+    if share > 0.01:
+        axes.text(
+            0.02,
+            0.02,
+            f"{share:.0%} of the points lie beyond the robot's surroundings, up to "
+            f"{farthest:.0f} m: not in this view",
+            transform=axes.transAxes,
+            fontsize=10,
+            color=_WARNING_COLOUR,
+            bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": _WARNING_COLOUR},
+        )
+
+
+def _top_view(data: ReportInput, maps: _Maps) -> Figure:
     figure = _figure(14, 7.8)
     panels = figure.subplots(1, 2, sharex=True, sharey=True)
-    shown_after = [p[m, :2] for p, m in zip(after, objects, strict=True)]
-    shown_before = [p[m, :2] for p, m in zip(before, objects, strict=True)]
-    extent = _top_extent(shown_after)
+    shown_after = [p[m, :2] for p, m in zip(maps.after, maps.objects, strict=True)]
+    shown_before = [p[m, :2] for p, m in zip(maps.before, maps.objects, strict=True)]
+    extent = maps.extent
     # Cells of 2 cm at least (the segmentation's voxel): sparse clouds still show surfaces.
     cells = int(min(_TOP_PIXELS, (extent[1] - extent[0]) / _MIN_CELL_M))
-    for axes, layers, title in zip(
-        panels, (shown_before, shown_after), _panel_titles(data), strict=True
+    for axes, layers, placed, title in zip(
+        panels,
+        (shown_before, shown_after),
+        (maps.before, maps.after),
+        _panel_titles(data),
+        strict=True,
     ):
         _draw(axes, layers, extent, cols=cells, rows=cells)
+        _outside_note(axes, placed, maps.surroundings)
         axes.set_title(title)
         axes.set_aspect("equal", adjustable="box")
         axes.set_xlabel("x (m)")
@@ -329,17 +434,14 @@ def _top_view(
     return figure
 
 
-def _side_view(
-    data: ReportInput,
-    before: list[Points],
-    after: list[Points],
-    x_range: tuple[float, float],
-    floor_z: float,
-) -> Figure:
+def _side_view(data: ReportInput, maps: _Maps) -> Figure:
     figure = _figure(14, 6.4)
     panels = figure.subplots(2, 1, sharex=True, sharey=True)
-    x0, x1 = x_range
-    inside = [p[(p[:, 0] >= x0) & (p[:, 0] <= x1)] for p in after]
+    x0, x1, _, _ = maps.extent
+    floor_z = maps.floor_z
+    # Heights of both maps' points in the top view's box: a tilted failed map must not
+    # stretch the panel either.
+    inside = [p[_inside(p[:, :2], maps.extent)] for p in (*maps.before, *maps.after)]
     heights = np.concatenate([p[:, [0, 2]] for p in inside if len(p)] or [np.zeros((0, 2))])
     top = _dense_extent(
         heights, cell_m=0.05, margin_m=0.15, fallback=(x0, x1, floor_z, floor_z + 1)
@@ -348,7 +450,9 @@ def _side_view(
     cols = int(min(_SIDE_COLS, (x1 - x0) / _MIN_CELL_M))
     # Heights are stretched on screen: finer cells in z keep the floor a thin line.
     rows = int(min(_SIDE_ROWS, (extent[3] - extent[2]) / (_MIN_CELL_M / 2)))
-    for axes, placed, title in zip(panels, (before, after), _panel_titles(data), strict=True):
+    for axes, placed, title in zip(
+        panels, (maps.before, maps.after), _panel_titles(data), strict=True
+    ):
         _draw(axes, [p[:, [0, 2]] for p in placed], extent, cols=cols, rows=rows)
         axes.set_title(title)
         axes.set_ylabel("z (m)")
@@ -362,32 +466,72 @@ def _side_view(
     return figure
 
 
+def convergence_note(data: ReportInput) -> str | None:
+    """Why the error curve's last value is not the reported metric error (None when both read
+    the same). They measure different things: the curve is stage 4's own error (eq. 11), the
+    metric the verdict judges is eq. 12 (`pipeline.metric`)."""
+    if not data.error_per_iteration:
+        return None
+    last, final = _mm(data.error_per_iteration[-1]), _mm(data.metric_error_final)
+    if last == final:
+        return None
+    if not np.isfinite(data.metric_error_final):
+        return (
+            f"The curve ends at {last}; no metric error was measured (no object points of a "
+            "LiDAR other than the reference to compare)."
+        )
+    return (
+        f"The curve ends at {last}, the reported metric error is {final}: the curve is the "
+        "optimiser's own error (eq. 11: every nearest-neighbour distance as it is, on the points "
+        "it optimises), the metric (eq. 12) caps each distance and takes every object point."
+    )
+
+
 def _error_curve(data: ReportInput) -> Figure:
-    figure = _figure(8, 4.5)
+    import textwrap
+
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
+    figure = _figure(8, 4.8)
     axes = figure.subplots()
     errors = np.asarray(data.error_per_iteration, dtype=np.float64) * 1000
+    final_mm = data.metric_error_final * 1000
     if len(errors):
-        axes.plot(np.arange(len(errors)), errors, marker="o", markersize=3, color=LIDAR_COLOURS[0])
-        finite = errors[np.isfinite(errors) & (errors > 0)]
+        axes.plot(
+            np.arange(len(errors)),
+            errors,
+            marker="o",
+            markersize=3,
+            color=LIDAR_COLOURS[0],
+            label="optimiser's error (eq. 11)",
+        )
+        if np.isfinite(final_mm):
+            axes.axhline(
+                final_mm,
+                color=LIDAR_COLOURS[1],
+                linestyle="--",
+                linewidth=1.2,
+                label=f"reported metric error (eq. 12): {_mm(data.metric_error_final)}",
+            )
+        finite = np.concatenate([errors, [final_mm]])
+        finite = finite[np.isfinite(finite) & (finite > 0)]
         if len(finite) and finite.max() / finite.min() > 20:
-            from matplotlib.ticker import ScalarFormatter
-
             axes.set_yscale("log")
             axes.yaxis.set_major_formatter(ScalarFormatter())
         axes.annotate(
-            f"{errors[-1]:.2f} mm",
+            _mm(data.error_per_iteration[-1]),
             (len(errors) - 1, errors[-1]),
             textcoords="offset points",
             xytext=(-10, 10),
             ha="right",
         )
+        axes.legend(loc="upper right", framealpha=0.9)
     else:
         axes.text(0.5, 0.5, "no iterations recorded", ha="center", transform=axes.transAxes)
-    from matplotlib.ticker import MaxNLocator
-
     axes.xaxis.set_major_locator(MaxNLocator(integer=True))
-    axes.set_xlabel("iteration")
-    axes.set_ylabel("mean point distance to the reference map (mm)")
+    note = convergence_note(data)
+    axes.set_xlabel("iteration" + ("\n" + textwrap.fill(note, 90) if note else ""))
+    axes.set_ylabel("mean point distance to the reference map (mm)", fontsize=9)
     axes.grid(True, alpha=0.3, which="both")
     state = (
         "" if data.converged is None else (", converged" if data.converged else ", not converged")
@@ -400,4 +544,8 @@ def _error_curve(data: ReportInput) -> Figure:
 
 
 def _mm(value: float) -> str:
-    return "n/a" if not np.isfinite(value) else f"{value * 1000:.1f} mm"
+    """Millimetres: two decimals below 10 mm, one above."""
+    if not np.isfinite(value):
+        return "n/a"
+    size = abs(value) * 1000
+    return f"{value * 1000:.{2 if size < 10 else 1}f} mm"

@@ -8,17 +8,21 @@ import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from datetime import timedelta
+from http import HTTPStatus
 
 from anyio import to_thread
-from fastapi import FastAPI
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+from starlette.routing import Match
 
 from pipeline import __version__
 from service import repository
+from service.api_docs import install_api_docs
 from service.dashboard import router as dashboard_router
 from service.db import Database
 from service.deps import Services
 from service.metrics import Metrics, MetricsMiddleware
-from service.problems import install_problem_handlers
+from service.problems import MethodNotAllowed, install_problem_handlers, problem_response
 from service.routes import exports, fleet, health, reports, robots, runs, tolerance
 from service.settings import Settings
 from service.storage import Storage, make_storage
@@ -46,15 +50,51 @@ def create_app(settings: Settings) -> FastAPI:
             app.state.services = None
             services.db.dispose()
 
-    app = FastAPI(title="fleetcal", version=__version__, description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(
+        title="fleetcal",
+        version=__version__,
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        docs_url=None,  # install_api_docs: the same pages, their assets served from here
+        redoc_url=None,
+    )
+    install_api_docs(app)
     app.state.services = None
     install_problem_handlers(app)
+    app.add_exception_handler(HTTPStatus.METHOD_NOT_ALLOWED, method_not_allowed)
     app.add_middleware(MetricsMiddleware, metrics=metrics)
     # Each router carries its full prefix (/v1/...), so route templates in metrics are complete.
     for module in (health, runs, robots, tolerance, fleet, reports, exports):
         app.include_router(module.router)
     app.include_router(dashboard_router)
     return app
+
+
+_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """The methods some route of the app serves at the request's path."""
+    routes = request.app.router.routes
+    return [
+        method
+        for method in _METHODS
+        if any(
+            route.matches({**request.scope, "method": method})[0] is Match.FULL for route in routes
+        )
+    ]
+
+
+async def method_not_allowed(request: Request, exc: Exception) -> JSONResponse:
+    # Starlette's own 405 names the methods of the first route on the path only: `GET` on
+    # /v1/robots/{robot_id}, where PUT is served too.
+    allowed = ", ".join(allowed_methods(request))
+    return problem_response(
+        MethodNotAllowed(
+            f"{request.method} is not served here; this path allows {allowed}",
+            headers={"Allow": allowed},
+        )
+    )
 
 
 def sweep_orphan_recordings(db: Database, storage: Storage, older_than: timedelta) -> int:

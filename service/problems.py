@@ -86,7 +86,9 @@ NotFound = _error("not-found", "Not found", HTTPStatus.NOT_FOUND)
 InvalidRequest = _error("invalid-request", "Invalid request", HTTPStatus.UNPROCESSABLE_ENTITY)
 InvalidCursor = _error("invalid-cursor", "Invalid pagination cursor", HTTPStatus.BAD_REQUEST)
 InvalidHeader = _error("invalid-header", "Invalid request header", HTTPStatus.BAD_REQUEST)
-InvalidConfig = _error("invalid-config", "Invalid calibration config", HTTPStatus.BAD_REQUEST)
+InvalidConfig = _error(
+    "invalid-config", "Invalid calibration config", HTTPStatus.UNPROCESSABLE_ENTITY
+)
 MethodNotAllowed = _error("method-not-allowed", "Method not allowed", HTTPStatus.METHOD_NOT_ALLOWED)
 Conflict = _error("conflict", "Conflicting request", HTTPStatus.CONFLICT)
 # Uploads.
@@ -138,10 +140,6 @@ def problem_for(exc: Exception) -> ApiError:
     if isinstance(exc, StarletteHTTPException):
         if exc.status_code == HTTPStatus.NOT_FOUND:
             return NotFound("no such endpoint; see /docs or openapi/openapi.json")
-        if exc.status_code == HTTPStatus.METHOD_NOT_ALLOWED:
-            return MethodNotAllowed(
-                "this endpoint does not support the method", headers=dict(exc.headers or {})
-            )
         generic = _error(
             "http-error", HTTPStatus(exc.status_code).phrase, HTTPStatus(exc.status_code)
         )
@@ -170,6 +168,10 @@ async def _handle(request: Request, exc: Exception) -> JSONResponse:
             problem.slug,
             exc_info=(type(exc), exc, exc.__traceback__),
         )
+    return problem_response(problem)
+
+
+def problem_response(problem: ApiError) -> JSONResponse:
     return JSONResponse(
         problem.document(),
         status_code=problem.status,

@@ -14,9 +14,9 @@ from datetime import UTC, datetime
 from typing import Any
 
 from pydantic import ValidationError
-from sqlalchemy import func, select, tuple_, update
+from sqlalchemy import case, func, select, true, tuple_, update
 from sqlalchemy.dialects import postgresql, sqlite
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, aliased
 
 from service.models import (
     LidarExtrinsic,
@@ -462,6 +462,150 @@ def history(
     if after is not None:
         stmt = stmt.where(tuple_(LidarExtrinsic.measured_at, LidarExtrinsic.id) > tuple_(*after))
     return _points(session, stmt)
+
+
+# -- the fleet ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class RobotColumns:
+    id: str
+    model: str | None
+    metadata: dict[str, Any]
+    created_at: datetime
+    updated_at: datetime
+
+
+@dataclass(frozen=True, slots=True)
+class AcceptedRow:
+    """A robot's newest passed result: the calibration it should be using."""
+
+    run_id: uuid.UUID
+    measured_at: datetime
+    metric_error_final: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class FleetRow:
+    robot: RobotColumns
+    latest: RunRow | None
+    accepted: AcceptedRow | None
+
+
+@dataclass(frozen=True, slots=True)
+class FleetTotals:
+    """Counts over the whole fleet, by each robot's latest run (not over one page)."""
+
+    robots: int
+    latest_passed: int
+    latest_failed: int
+    in_progress: int
+    no_run: int
+    with_accepted: int
+
+
+@dataclass(frozen=True, slots=True)
+class FleetPage:
+    rows: list[FleetRow]
+    totals: FleetTotals
+
+
+def fleet(session: Session, *, limit: int, after_id: str | None) -> FleetPage:
+    """Up to `limit` robots by id after `after_id`, each with its latest run and accepted
+    calibration, and the fleet's totals: one statement, whatever the number of robots.
+
+    The newest run and the newest passed result of each robot are correlated subqueries on
+    `ix_runs_robot_created` and `ix_results_robot_passed`: one index probe per robot, where a
+    window over every run would sort the whole table.
+    """
+    newest_run = aliased(Run, name="newest_run")
+    newest_passed = aliased(Result, name="newest_passed")
+    latest_run_id = (
+        select(newest_run.id)
+        .where(newest_run.robot_id == Robot.id)
+        .order_by(newest_run.created_at.desc(), newest_run.id.desc())
+        .limit(1)
+        .scalar_subquery()
+    )
+    accepted_run_id = (
+        select(newest_passed.run_id)
+        .where(newest_passed.robot_id == Robot.id, newest_passed.passed.is_(True))
+        .order_by(newest_passed.measured_at.desc(), newest_passed.run_id.desc())
+        .limit(1)
+        .scalar_subquery()
+    )
+    latest = (
+        select(
+            Robot.id.label("robot_id"),
+            Robot.model,
+            Robot.meta.label("robot_metadata"),
+            Robot.created_at.label("robot_created_at"),
+            Robot.updated_at.label("robot_updated_at"),
+            *(column.label(f"run_{column.key}") for column in _RUN_COLUMNS),
+            Result.passed,
+            Result.metric_error_final,
+            accepted_run_id.label("accepted_run_id"),
+        )
+        .select_from(Robot)
+        .outerjoin(Run, Run.id == latest_run_id)
+        .outerjoin(Result, Result.run_id == Run.id)
+        .cte("latest")
+    )
+    status, passed = latest.c.run_status, latest.c.passed
+
+    def count_of(condition: Any) -> Any:
+        return func.coalesce(func.sum(case((condition, 1), else_=0)), 0)
+
+    totals = select(
+        func.count().label("robots"),
+        count_of((status == RunStatus.SUCCEEDED) & passed.is_(True)).label("latest_passed"),
+        count_of((status == RunStatus.FAILED) | passed.is_(False)).label("latest_failed"),
+        count_of(status.in_([RunStatus.QUEUED, RunStatus.RUNNING])).label("in_progress"),
+        count_of(latest.c.run_id.is_(None)).label("no_run"),
+        count_of(latest.c.accepted_run_id.is_not(None)).label("with_accepted"),
+    ).cte("totals")
+    page_stmt = select(latest).order_by(latest.c.robot_id).limit(limit)
+    if after_id is not None:
+        page_stmt = page_stmt.where(latest.c.robot_id > after_id)
+    page = page_stmt.cte("page")
+    accepted = aliased(Result, name="accepted")
+    stmt = (
+        select(
+            *totals.c,
+            *page.c,
+            accepted.measured_at.label("accepted_measured_at"),
+            accepted.metric_error_final.label("accepted_metric_error_final"),
+        )
+        # The totals row is there even when the page is empty (a cursor past the last robot).
+        .select_from(totals)
+        .outerjoin(page, true())
+        .outerjoin(accepted, accepted.run_id == page.c.accepted_run_id)
+        .order_by(page.c.robot_id)
+    )
+    rows = session.connection().execute(stmt).mappings().all()
+    totals_row = FleetTotals(**{column.name: int(rows[0][column.name]) for column in totals.c})
+    return FleetPage(
+        rows=[_fleet_row(row) for row in rows if row["robot_id"] is not None], totals=totals_row
+    )
+
+
+def _fleet_row(row: Any) -> FleetRow:
+    run = RunColumns(*(row[f"run_{column.key}"] for column in _RUN_COLUMNS))
+    return FleetRow(
+        robot=RobotColumns(
+            row["robot_id"],
+            row["model"],
+            row["robot_metadata"],
+            row["robot_created_at"],
+            row["robot_updated_at"],
+        ),
+        latest=None if run.id is None else RunRow(run, row["passed"], row["metric_error_final"]),
+        accepted=None
+        if row["accepted_run_id"] is None
+        else AcceptedRow(
+            row["accepted_run_id"], row["accepted_measured_at"], row["accepted_metric_error_final"]
+        ),
+    )
 
 
 # -- tolerance profiles ---------------------------------------------------------------------------

@@ -7,9 +7,19 @@ import uuid
 from datetime import datetime
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, JsonValue, StrictFloat
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    JsonValue,
+    StrictBool,
+    StrictFloat,
+    model_validator,
+)
 
+from pipeline.transforms import from_translation_xyzw
 from service.models import RunKind, RunStatus
+from service.parameters import PlainText
 from service.problems import Problem
 
 ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
@@ -26,11 +36,24 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
-class Pose(_Strict):
+class StoredPose(_Strict):
     """`T_base_lidar`: translation in metres, rotation as a unit quaternion [x, y, z, w]."""
 
     translation: Vector3
     rotation_xyzw: Quaternion
+
+
+class Pose(StoredPose):
+    """`T_base_lidar` as accepted: a quaternion with a direction (the worker normalises it)."""
+
+    @model_validator(mode="after")
+    def _rotation_has_a_direction(self) -> Pose:
+        # The worker's own rule: a pose it cannot use fails every run that compares against it.
+        try:
+            from_translation_xyzw(self.translation, self.rotation_xyzw)
+        except ValueError as err:
+            raise ValueError(f"rotation_xyzw: {err}") from err
+        return self
 
 
 # -- runs ---------------------------------------------------------------------------------------
@@ -175,24 +198,35 @@ class ToleranceLimits(_Strict):
     max_rotation_deviation_deg: StrictFloat | None = Field(default=None, gt=0)
 
 
-class ToleranceProfileIn(_Strict):
+_DESIGN_EXTRINSICS = "The model's design `T_base_lidar` per LiDAR frame."
+
+
+class _ToleranceProfileFields(_Strict):
     robot_model: str | None = Field(
         default=None, pattern=NAME_PATTERN, description="The robot model this profile applies to."
     )
-    is_default: bool = Field(
+    # Strict: lax parsing took 0 and "no" for booleans.
+    is_default: StrictBool = Field(
         default=False,
         description="Used for robots whose model has no "
         "profile; setting it clears the flag on the previous default.",
     )
     limits: ToleranceLimits = Field(default_factory=ToleranceLimits)
-    design_extrinsics: dict[str, Pose] | None = Field(
-        default=None, description="The model's design `T_base_lidar` per LiDAR frame."
+
+
+class ToleranceProfileIn(_ToleranceProfileFields):
+    design_extrinsics: dict[PlainText, Pose] | None = Field(
+        default=None, description=_DESIGN_EXTRINSICS
     )
 
 
-class ToleranceProfilePublic(ToleranceProfileIn):
+class ToleranceProfilePublic(_ToleranceProfileFields):
     model_config = ConfigDict(extra="ignore")
 
+    # As stored: a profile accepted before poses were checked must still show, to be replaced.
+    design_extrinsics: dict[str, StoredPose] | None = Field(
+        default=None, description=_DESIGN_EXTRINSICS
+    )
     name: str
     created_at: datetime
     updated_at: datetime

@@ -95,15 +95,50 @@ def render(document: dict[str, Any]) -> str:
             f"{lidar['points_per_second'] / 1000:.1f} k points/s, "
             f"{lidar['scan_pattern'].replace('_', '-')} scans; {pose}"
         )
-    stops = document["stops"]
-    mean = sum(stop["duration"] for stop in stops) / len(stops)
-    lines.append(f"stops       {len(stops)} (mean {mean:.1f} s; times from the recording's start)")
-    t0 = document["start"]
-    lines += [
-        f"  {k:>3}  {stop['start'] - t0:7.2f} - {stop['end'] - t0:7.2f} s"
-        f"  ({stop['duration']:.1f} s)"
-        for k, stop in enumerate(stops)
-    ]
+    lines += _clock_lines(document)
+    lines += _stop_lines(document)
     lines.append(f"warnings    {len(document['warnings']) or 'none'}")
     lines += [f"  - {warning}" for warning in document["warnings"]]
     return "\n".join(lines)
+
+
+def _lag(offset_s: float) -> str:
+    return f"{abs(offset_s):.3f} s {'behind' if offset_s >= 0 else 'ahead of'} the log time"
+
+
+def _clock_lines(document: dict[str, Any]) -> list[str]:
+    """The trajectory's header clock, and each LiDAR whose clock disagrees with it."""
+    shifted = [lidar for lidar in document["lidars"] if lidar["clock_shift"]]
+    lines = [
+        f"clocks      trajectory header stamps {_lag(document['trajectory_header_offset'])}; "
+        + (f"{len(shifted)} LiDAR(s) on another clock" if shifted else "LiDARs on the same clock")
+    ]
+    lines += [
+        f"  {lidar['frame']}  header stamps {_lag(lidar['header_offset'])}: "
+        f"shifted by {lidar['clock_shift']:+.3f} s onto the trajectory's clock"
+        for lidar in shifted
+    ]
+    return lines
+
+
+def _stop_lines(document: dict[str, Any]) -> list[str]:
+    """One row per stop: its span, its duration, and the scans each LiDAR has wholly inside."""
+    stops, frames = document["stops"], [lidar["frame"] for lidar in document["lidars"]]
+    mean = sum(stop["duration"] for stop in stops) / len(stops)
+    widths = [max(len(frame), 5) for frame in frames]
+    lines = [
+        f"stops       {len(stops)} (mean {mean:.2f} s; times from the recording's start; "
+        "scans wholly inside each, per LiDAR)",
+        "                 span            duration  "
+        + "  ".join(f"{frame:>{w}}" for frame, w in zip(frames, widths, strict=True)),
+    ]
+    t0 = document["start"]
+    for k, stop in enumerate(stops):
+        scans = "  ".join(
+            f"{stop['scans'][frame]:>{w}}" for frame, w in zip(frames, widths, strict=True)
+        )
+        lines.append(
+            f"  {k:>3}  {stop['start'] - t0:7.2f} - {stop['end'] - t0:7.2f} s"
+            f"  {stop['duration']:6.2f} s  {scans}"
+        )
+    return lines

@@ -1,4 +1,7 @@
-"""`fleetcal synth SCENARIO --out DIR`: write a synthetic recording and its ground truth."""
+"""`fleetcal synth SCENARIO --out DIR`: write a synthetic recording and its ground truth.
+
+`fleetcal synth random --seed N --out DIR` writes the randomised scenario the seed draws.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +13,8 @@ import typer
 
 from pipeline.cli.common import progress, user_errors
 
+RANDOM = "random"
+
 
 def register(app: typer.Typer) -> None:
     app.command("synth")(synth_command)
@@ -17,7 +22,11 @@ def register(app: typer.Typer) -> None:
 
 def synth_command(
     scenario: Annotated[
-        str, typer.Argument(help="scenario name, e.g. set1-box, set2-capsule, spinning, tiny")
+        str,
+        typer.Argument(
+            help="scenario name, e.g. set1-box, set2-capsule, spinning, tiny; or random (the "
+            "seed draws the routine, LiDARs, objects and errors)"
+        ),
     ],
     out: Annotated[
         Path, typer.Option("--out", help="output directory (must not exist or be empty)")
@@ -33,13 +42,16 @@ def synth_command(
     The recording follows the input contract (PointCloud2 per LiDAR, /odom, /tf_static with
     perturbed extrinsics); truth.json and labels.npz hold the true poses and noise labels.
     """
+    from pipeline.synth.random_scenario import random_scenario
     from pipeline.synth.recording import write_recording
     from pipeline.synth.scenarios import get_scenario
 
     started = time.perf_counter()
     with user_errors():
-        spec = get_scenario(scenario)
+        spec = random_scenario(seed) if scenario == RANDOM else get_scenario(scenario)
         progress(f"synthesising {spec.name} (seed {seed}, rate x{rate_scale:g}) into {out}")
+        if scenario == RANDOM:
+            progress(f"{spec.name}: class {spec.scenario_class}; {spec.description}")
         write_recording(spec, out, seed=seed, rate_scale=rate_scale, ros1=ros1, progress=progress)
     progress(f"done in {time.perf_counter() - started:.1f} s: {out}")
     typer.echo(str(out))

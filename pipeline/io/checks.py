@@ -35,7 +35,7 @@ def require_stop_points(summary: RecordingSummary) -> None:
                 touching = 0 if cloud is None else cloud.scans_touching
                 why = (
                     f"none of its scans lies wholly inside the stop ({touching} stamped in it, "
-                    f"scan period {lidar.period_s:.3f} s, stop {stop.t_end - stop.t_start:.2f} s); "
+                    f"scan period {lidar.period_s:.3f} s, stop {stop.duration_s:.2f} s); "
                     "make the stops longer or check the LiDAR's stamps"
                 )
             else:
@@ -85,4 +85,35 @@ def recording_warnings(summary: RecordingSummary, thresholds: WarningThresholds)
                     f"points per stop (median over LiDARs {median:.0f}); check that it is "
                     "connected, unobstructed and looking at the floor"
                 )
+    warnings += stop_warnings(summary, thresholds)
     return tuple(warnings)
+
+
+def stop_warnings(summary: RecordingSummary, thresholds: WarningThresholds) -> list[str]:
+    """Short stops, and LiDARs with few scans in a stop: kept, but worth knowing about."""
+    warnings = []
+    stops = summary.stops
+    short = [stop for stop in stops if stop.duration_s < thresholds.short_stop_s]
+    if short:
+        shortest = min(short, key=lambda stop: stop.duration_s)
+        warnings.append(
+            f"short stops: {len(short)} of {len(stops)} stops last under "
+            f"{thresholds.short_stop_s:g} s (shortest: stop {shortest.index}, "
+            f"{shortest.duration_s:.2f} s); they are kept, but their clouds hold fewer scans. If "
+            "the calibration fails its precision checks, record longer stops"
+        )
+    for lidar in summary.lidars:
+        scans = [
+            (cloud.scans if (cloud := stop.clouds.get(lidar.frame)) else 0, stop.index)
+            for stop in stops
+        ]
+        sparse = [entry for entry in scans if entry[0] < thresholds.min_scans_per_stop]
+        if sparse:
+            fewest, where = min(sparse)
+            warnings.append(
+                f"sparse stops: LiDAR {lidar.frame} ({lidar.topic}) has fewer than "
+                f"{thresholds.min_scans_per_stop} scans in {len(sparse)} of {len(stops)} stops "
+                f"(fewest: {fewest} in stop {where}, scan period {lidar.period_s:.3f} s); they "
+                "are kept, but cover its field of view sparsely. Longer stops give denser clouds"
+            )
+    return warnings

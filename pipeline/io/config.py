@@ -44,7 +44,18 @@ class StopDetectionConfig(BaseModel):
 
     max_linear_speed: float = Field(default=0.02, gt=0, description="m/s")
     max_angular_speed_deg: float = Field(default=1.0, gt=0, description="deg/s")
-    min_dwell_s: float = Field(default=1.0, gt=0, description="shortest stop kept, seconds")
+    min_dwell_s: float = Field(
+        default=0.3,
+        gt=0,
+        description="shortest stop kept, seconds (routines stop for 0.3-3 s; a stop under "
+        "1 s is kept with a warning, see WarningThresholds.short_stop_s)",
+    )
+    min_scan_periods: float = Field(
+        default=3.0,
+        ge=0,
+        description="... or this many scan periods of the slowest LiDAR, if longer: a stop that "
+        "long holds at least one scan wholly inside it, whatever the scans' phase",
+    )
     speed_window_s: float = Field(
         default=0.2,
         ge=0,
@@ -82,6 +93,20 @@ class WarningThresholds(BaseModel):
     min_relative_points: float = Field(
         default=0.05, ge=0, le=1, description="same, relative to the median LiDAR's points per stop"
     )
+    short_stop_s: float = Field(
+        default=1.0,
+        ge=0,
+        description="stops shorter than this are kept, with a warning: the benchmark's routines "
+        "all stop at least this long, so shorter ones are outside what it has measured",
+    )
+    min_scans_per_stop: int = Field(
+        default=6,
+        ge=0,
+        description="a LiDAR with fewer scans wholly inside a stop has a sparse cloud there (a "
+        "non-repetitive pattern fills its field of view in over many scans); kept, with a warning. "
+        "Issue 13 saw 0.5 s stops (4-5 scans of a rosette) calibrate to 22 mm, 0.8 s stops (7) "
+        "to 1-3 mm",
+    )
 
 
 class ReaderConfig(BaseModel):
@@ -100,6 +125,10 @@ class ReaderConfig(BaseModel):
     """Initial `T_base_lidar` by LiDAR frame; overrides `/tf_static`."""
     drop_zero_points: bool = True
     """Drop points exactly at the sensor origin, the no-return marker of some drivers (Livox)."""
+    clock_tolerance_s: float = Field(default=0.5, gt=0)
+    """A LiDAR whose header stamps lag its log times by more than this beyond the trajectory's
+    lag is on another clock, and is realigned onto the trajectory's (see `pipeline.io.clocks`);
+    within it, the difference is transport latency and the header stamps are kept."""
     stops: StopDetectionConfig = StopDetectionConfig()
     archive: ArchiveLimits = ArchiveLimits()
     warnings: WarningThresholds = WarningThresholds()

@@ -13,12 +13,24 @@ class UnknownFormatError(RecordingError):
     """The file is not a recording we can read (checked by its magic bytes, not its name)."""
 
 
+class EmptyRecordingError(RecordingError):
+    """The file is empty (0 bytes), or the recording holds no message."""
+
+
 class CorruptRecordingError(RecordingError):
     """The file looks like a recording but cannot be decoded (truncated, damaged, unsafe)."""
 
 
 class NoPointCloudError(RecordingError):
     """The recording has no `sensor_msgs/PointCloud2` topic (or none of the configured ones)."""
+
+
+class LidarTopicsError(RecordingError):
+    """The PointCloud2 topics do not map one to one onto LiDAR frames (shared or empty frame)."""
+
+
+class LidarPacketsError(NoPointCloudError):
+    """The recording holds raw LiDAR packets (driver messages) but no PointCloud2 to read."""
 
 
 class TooFewLidarsError(RecordingError):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import enum
 from pathlib import Path
 
-from pipeline.io.errors import UnknownFormatError
+from pipeline.io.errors import EmptyRecordingError, UnknownFormatError
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -22,6 +22,8 @@ class RecordingFormat(enum.StrEnum):
     MCAP = "mcap"
     SQLITE3 = "sqlite3"
     ROS1 = "ros1"
+    MCAP_ROS1 = "mcap-ros1"
+    """A storage, not a file format: an MCAP file of the `ros1` profile (ROS 1 messages)."""
     ZIP = "zip"
     TAR = "tar"
     TAR_GZ = "tar.gz"
@@ -29,6 +31,10 @@ class RecordingFormat(enum.StrEnum):
     @property
     def is_archive(self) -> bool:
         return self in (RecordingFormat.ZIP, RecordingFormat.TAR, RecordingFormat.TAR_GZ)
+
+    @property
+    def holds_ros1_messages(self) -> bool:
+        return self in (RecordingFormat.ROS1, RecordingFormat.MCAP_ROS1)
 
 
 def detect_format_from_head(head: bytes) -> RecordingFormat | None:
@@ -49,6 +55,20 @@ def detect_format_from_head(head: bytes) -> RecordingFormat | None:
     if head[_TAR_MAGIC_OFFSET : _TAR_MAGIC_OFFSET + 5] == b"ustar":
         return RecordingFormat.TAR
     return None
+
+
+def mcap_profile(head: bytes) -> str | None:
+    """The profile (`ros2`, `ros1`, ...) in the header record that opens an MCAP file's `head`;
+    None when `head` is no MCAP or is cut inside the header."""
+    start = len(_MCAP_MAGIC)
+    if not head.startswith(_MCAP_MAGIC) or head[start : start + 1] != b"\x01":
+        return None
+    length_at = start + 1 + 8  # opcode, then the record's uint64 length
+    size = int.from_bytes(head[length_at : length_at + 4], "little")
+    profile = head[length_at + 4 : length_at + 4 + size]
+    if len(profile) != size:
+        return None
+    return profile.decode("utf-8", errors="replace")
 
 
 def detect_format(path: Path) -> RecordingFormat:
@@ -73,6 +93,11 @@ def detect_format(path: Path) -> RecordingFormat:
     if not path.exists():
         raise UnknownFormatError(f"{path} does not exist; check the path")
     found = _file_format(path)
+    if found is None and path.is_file() and path.stat().st_size == 0:
+        raise EmptyRecordingError(
+            f"{path} is empty (0 bytes): the recording was not written or not copied in full; "
+            "copy or upload it again"
+        )
     if found is None:
         raise UnknownFormatError(
             f"{path} is not a recording we can read (its first bytes match no known format); "

@@ -25,7 +25,11 @@ def inspect_recording(path: Path | str, config: ReaderConfig | None = None) -> d
 
 def report(summary: RecordingSummary, warnings: tuple[str, ...]) -> dict[str, Any]:
     """`{"format", "lidars": [{"frame", "topic", "points", ...}], "stops": [{"start", "end",
-    ...}], "base_frame", "warnings"}` plus context; times in seconds, `points` = all published.
+    "duration", "scans": {frame: n}}], "base_frame", "warnings"}` plus context; times in seconds
+    on the log clock, `points` = all published, a stop's `scans` = those wholly inside it.
+    Clocks: `trajectory_header_offset` and each LiDAR's `header_offset` are the median
+    `log time - header stamp`; a LiDAR's `clock_shift` is what was added to its stamps to put
+    them on the trajectory's clock (0 unless the clocks disagree).
     """
     return {
         "path": summary.path,
@@ -38,6 +42,7 @@ def report(summary: RecordingSummary, warnings: tuple[str, ...]) -> dict[str, An
         "base_frame": summary.base_frame,
         "odom_frame": summary.odom_frame,
         "trajectory": summary.trajectory_source,
+        "trajectory_header_offset": summary.trajectory_clock_offset_ns * 1e-9,
         "lidars": [
             {
                 "frame": lidar.frame,
@@ -46,6 +51,10 @@ def report(summary: RecordingSummary, warnings: tuple[str, ...]) -> dict[str, An
                 "scans": lidar.scans,
                 "points_per_second": lidar.points_per_second,
                 "scan_pattern": str(lidar.scan_pattern),
+                "scan_pattern_basis": lidar.scan_pattern_basis,
+                "period": lidar.period_s,
+                "header_offset": lidar.clock_offset_ns * 1e-9,
+                "clock_shift": lidar.clock_shift_ns * 1e-9,
                 "valid_points_in_stops": sum(
                     stop.clouds[lidar.frame].valid_points
                     for stop in summary.stops
@@ -60,8 +69,11 @@ def report(summary: RecordingSummary, warnings: tuple[str, ...]) -> dict[str, An
             {
                 "start": stop.t_start,
                 "end": stop.t_end,
-                "duration": stop.t_end - stop.t_start,
-                "scans": {frame: cloud.scans for frame, cloud in stop.clouds.items()},
+                "duration": stop.duration_s,
+                "scans": {
+                    lidar.frame: cloud.scans if (cloud := stop.clouds.get(lidar.frame)) else 0
+                    for lidar in summary.lidars
+                },
             }
             for stop in summary.stops
         ],

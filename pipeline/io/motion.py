@@ -1,7 +1,8 @@
 """First pass over a recording: `/tf_static` and the base's trajectory (odometry or `/tf`).
 
 The odometry may describe another body frame than `base` (e.g. `base_footprint`); then the static
-chain from that frame to `base` is composed on, as tf itself would.
+chain from that frame to `base` is composed on, as tf itself would. The trajectory is on its own
+header clock (see `clocks`), whose offset to the bag's log times is measured here.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from pipeline.io.clocks import HeaderClock
 from pipeline.io.errors import NoTrajectoryError
 from pipeline.io.source import OpenRecording, reading_errors, stamp_ns
 from pipeline.io.tf_tree import (
@@ -30,23 +32,28 @@ TF_TYPES = frozenset({TF_MESSAGE, "tf/msg/tfMessage"})  # ROS 1 bags recorded wi
 
 @dataclass(frozen=True)
 class Motion:
-    """The static tree, the trajectory of `base` in `odom_frame`, and notes for the user."""
+    """The static tree, the trajectory of `base` in `odom_frame` on the header clock `clock`,
+    and notes for the user."""
 
     tree: TransformTree
     trajectory: Trajectory
     odom_frame: str
+    clock: HeaderClock
     notes: tuple[str, ...] = ()
 
 
 @dataclass
 class _Samples:
-    """Pose samples of one `parent -> child` edge, as flat lists until the pass ends."""
+    """Pose samples of one `parent -> child` edge (header stamp, log time, pose), as flat lists
+    until the pass ends."""
 
     stamps: list[int] = field(default_factory=list)
+    logs: list[int] = field(default_factory=list)
     poses: list[tuple[float, ...]] = field(default_factory=list)
 
-    def add(self, stamp_ns: int, position: Any, orientation: Any) -> None:
+    def add(self, stamp_ns: int, log_ns: int, position: Any, orientation: Any) -> None:
         self.stamps.append(stamp_ns)
+        self.logs.append(log_ns)
         self.poses.append(
             (
                 position.x,
@@ -97,13 +104,14 @@ def read_motion(
                     normalize_frame(msg.child_frame_id) or base_frame,
                 )
                 pose = msg.pose.pose
-                edges[key].add(stamp_ns(msg.header) or log_ns, pose.position, pose.orientation)
+                edges[key].add(stamp_ns(msg.header), log_ns, pose.position, pose.orientation)
             else:
                 for stamped in msg.transforms:
                     if normalize_frame(stamped.header.frame_id) == odom_frame:
                         key = (odom_frame, normalize_frame(stamped.child_frame_id))
                         edges[key].add(
-                            stamp_ns(stamped.header) or log_ns,
+                            stamp_ns(stamped.header),
+                            log_ns,
                             stamped.transform.translation,
                             stamped.transform.rotation,
                         )
@@ -135,7 +143,8 @@ def _trajectory(
         )
     (parent, child), T_child_base = found
     samples = edges[(parent, child)]
-    stamps = np.asarray(samples.stamps, dtype=np.int64)
+    header = np.asarray(samples.stamps, dtype=np.int64)
+    log = np.asarray(samples.logs, dtype=np.int64)
     poses = np.asarray(samples.poses, dtype=np.float64).reshape(-1, 7)
     valid = valid_samples(poses[:, :3], poses[:, 3:])
     notes: list[str] = []
@@ -144,7 +153,9 @@ def _trajectory(
             f"{int((~valid).sum())} trajectory samples on {where} had a NaN or zero "
             "quaternion and were ignored"
         )
-    stamps, poses = stamps[valid], poses[valid]
+    header, log, poses = header[valid], log[valid], poses[valid]
+    clock = HeaderClock.of(header, log)
+    stamps = clock.stamp(header, log)
     if len(np.unique(stamps)) < 2:
         raise NoTrajectoryError(
             f"{opened.path}: {where} holds {len(stamps)} usable pose(s) of {child!r}; "
@@ -156,7 +167,11 @@ def _trajectory(
     quats = (rotation * R_child_base).as_quat()
     name = source if child == base_frame else f"{source} ({child} -> {base_frame} from /tf_static)"
     return Motion(
-        tree, Trajectory.from_arrays(stamps, translations, quats, name), parent, tuple(notes)
+        tree,
+        Trajectory.from_arrays(stamps, translations, quats, name),
+        parent,
+        clock,
+        tuple(notes),
     )
 
 

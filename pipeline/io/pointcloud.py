@@ -1,7 +1,8 @@
 """Decode `sensor_msgs/PointCloud2` into (N, 3) float64 points, vectorised from its fields.
 
-Any `point_step` and row padding, float32 or float64 `x, y, z` at any offsets, either byte order;
-other fields are ignored and points with a NaN or infinite coordinate are dropped.
+Any `point_step` and row padding, organised (`height > 1`) or not, float32 or float64 `x, y, z` at
+any offsets, either byte order; other fields are ignored and points with a NaN or infinite
+coordinate are dropped, as are points at the origin (how Ouster and Livox drivers mark no return).
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.io.errors import CorruptRecordingError
-from pipeline.problem import ScanPattern
 
 # sensor_msgs/PointField datatype codes -> numpy kinds (only floats make sense for coordinates).
 _FLOAT_TYPES = {7: "f4", 8: "f8"}
@@ -28,15 +28,9 @@ _FIELD_NAMES = {
 }
 
 
-# The per-point beam index that the drivers of spinning multi-beam LiDARs publish (velodyne,
-# ouster, hesai, rslidar); Livox drivers publish `tag` and `line` instead.
-RING_FIELD = "ring"
-
-
-def scan_pattern(msg: Any) -> ScanPattern:
-    """Repetitive when the message's points carry a `ring` field (a spinning LiDAR), else not."""
-    names = {field.name for field in msg.fields}
-    return ScanPattern.REPETITIVE if RING_FIELD in names else ScanPattern.NON_REPETITIVE
+def field_names(msg: Any) -> tuple[str, ...]:
+    """The names of the message's per-point fields, in their order."""
+    return tuple(str(field.name) for field in msg.fields)
 
 
 def point_count(msg: Any) -> int:

@@ -29,7 +29,6 @@ from rosbags.interfaces import (
 
 from pipeline.io.config import ArchiveLimits
 from pipeline.io.errors import RecordingError
-from pipeline.io.formats import RecordingFormat
 from pipeline.io.motion import TF_TYPES
 from pipeline.io.source import OpenRecording, open_recording, reading_errors
 from pipeline.io.tf_tree import (
@@ -108,7 +107,7 @@ def write_calibrated_recording(
         original = _read_static_edges(opened, static)
         edges = calibrated_static_edges(original, calibrated, base)
         copied = [c for c in opened.connections if c.topic != TF_STATIC]
-        ros1 = opened.storage is RecordingFormat.ROS1
+        ros1 = opened.storage.holds_ros1_messages
         destination.parent.mkdir(parents=True, exist_ok=True)
         write = _copy_ros1 if ros1 else _copy_ros2
         messages, skipped = write(_Plan(opened, copied, static, edges), destination)

@@ -20,6 +20,8 @@ from typing import Any
 
 import apsw
 import yaml
+import zstandard
+from mcap.exceptions import McapError
 from rosbags import rosbag1, rosbag2
 from rosbags.interfaces import Connection
 from rosbags.serde import SerdeError
@@ -28,8 +30,15 @@ from rosbags.typesys.store import Typestore
 
 from pipeline.io.archive import extract_archive, find_recording
 from pipeline.io.config import ArchiveLimits
-from pipeline.io.errors import CorruptRecordingError, RecordingError
-from pipeline.io.formats import RecordingFormat, _file_format, detect_format
+from pipeline.io.errors import CorruptRecordingError, RecordingError, UnknownFormatError
+from pipeline.io.formats import (
+    HEAD_BYTES,
+    RecordingFormat,
+    _file_format,
+    detect_format,
+    mcap_profile,
+)
+from pipeline.io.mcap_ros1 import Ros1McapReader
 from pipeline.io.typestores import ros1_typestore, ros2_typestore
 
 _ROS2_STORAGES = (RecordingFormat.MCAP, RecordingFormat.SQLITE3)
@@ -51,6 +60,8 @@ READ_ERRORS: tuple[type[BaseException], ...] = (
     OSError,
     RuntimeError,  # lz4 frame errors in ROS 1 chunks
     UnicodeDecodeError,  # damaged names and definitions
+    McapError,  # the mcap library (ros1-profile MCAP)
+    zstandard.ZstdError,
 )
 # Damaged bytes also reach paths rosbags does not guard: its consistency asserts, a length field
 # asking for an absurd read (MemoryError, OverflowError), lookups of ids that do not exist. These
@@ -64,6 +75,7 @@ _BACKEND_ERRORS: tuple[type[BaseException], ...] = (
     KeyError,
 )
 _TRANSLATED = READ_ERRORS + _BACKEND_ERRORS
+_BACKENDS = {"rosbags", "mcap"}
 
 
 class OpenRecording:
@@ -74,11 +86,11 @@ class OpenRecording:
         path: Path,
         fmt: RecordingFormat,
         storage: RecordingFormat,
-        readers: Sequence[rosbag1.Reader | rosbag2.Reader],
+        readers: Sequence[rosbag1.Reader | rosbag2.Reader | Ros1McapReader],
     ) -> None:
         self.path, self.format, self.storage = path, fmt, storage
         self._readers = readers
-        self._store = ros1_typestore() if storage is RecordingFormat.ROS1 else ros2_typestore()
+        self._store = ros1_typestore() if storage.holds_ros1_messages else ros2_typestore()
         self._other_types: dict[str, Typestore] = {}
 
     @property
@@ -121,7 +133,7 @@ class OpenRecording:
                     get_types_from_msg(connection.msgdef.data, msgtype)
                 )
             store = self._other_types[msgtype]
-        if self.storage is RecordingFormat.ROS1:
+        if self.storage.holds_ros1_messages:
             return store.deserialize_ros1(raw, msgtype)
         return store.deserialize_cdr(raw, msgtype)
 
@@ -157,7 +169,7 @@ def _raised_by_backend(err: BaseException) -> bool:
     innermost = ""
     while tb is not None:
         innermost = tb.tb_frame.f_code.co_filename
-        if "rosbags" in Path(innermost).parts:
+        if _BACKENDS & set(Path(innermost).parts):
             return True
         tb = tb.tb_next
     return bool(innermost) and not innermost.endswith(".py")
@@ -208,11 +220,9 @@ def open_recording(
             )
             paths = [_named_for_rosbags(f, storage, i, scratch_path) for i, f in enumerate(files)]
         with reading_errors(path, storage):
-            readers: list[rosbag1.Reader | rosbag2.Reader] = []
+            readers: list[rosbag1.Reader | rosbag2.Reader | Ros1McapReader] = []
             for bag in paths:
-                reader: rosbag1.Reader | rosbag2.Reader = (
-                    rosbag1.Reader(bag) if storage is RecordingFormat.ROS1 else rosbag2.Reader(bag)
-                )
+                reader = _reader(bag, storage)
                 reader.open()
                 stack.callback(reader.close)
                 readers.append(reader)
@@ -227,8 +237,20 @@ def open_recording(
         yield OpenRecording(path, fmt, storage, readers)
 
 
+def _reader(
+    bag: Path, storage: RecordingFormat
+) -> rosbag1.Reader | rosbag2.Reader | Ros1McapReader:
+    if storage is RecordingFormat.ROS1:
+        return rosbag1.Reader(bag)
+    if storage is RecordingFormat.MCAP_ROS1:
+        return Ros1McapReader(bag)
+    return rosbag2.Reader(bag)
+
+
 def _storage_format(path: Path, fmt: RecordingFormat) -> RecordingFormat:
-    """MCAP, sqlite3 or ROS 1: what the reader will find inside a directory or file."""
+    """MCAP (ros2 or ros1 profile), sqlite3 or ROS 1: what the reader will find inside."""
+    if fmt is RecordingFormat.MCAP:
+        return _mcap_storage(path)
     if fmt is not RecordingFormat.ROS2_DIRECTORY:
         return fmt
     declared = _declared_storage(path / "metadata.yaml")
@@ -240,6 +262,21 @@ def _storage_format(path: Path, fmt: RecordingFormat) -> RecordingFormat:
             f"{path} mixes MCAP and sqlite3 storage files; a bag directory holds one kind"
         )
     return kinds.pop()
+
+
+def _mcap_storage(path: Path) -> RecordingFormat:
+    """MCAP with ROS 2 messages, or with ROS 1 messages (`mcap convert` of a ROS 1 bag)."""
+    with path.open("rb") as stream:
+        profile = mcap_profile(stream.read(HEAD_BYTES))
+    if profile == "ros1":
+        return RecordingFormat.MCAP_ROS1
+    if profile in ("ros2", None):  # None: a damaged header, which rosbags will report
+        return RecordingFormat.MCAP
+    raise UnknownFormatError(
+        f"{path} is an MCAP file of profile {profile!r}, not of ROS messages; fleetcal reads MCAP "
+        "written by `ros2 bag record` (profile ros2) or converted from a ROS 1 bag by "
+        "`mcap convert` (profile ros1)"
+    )
 
 
 def _declared_storage(metadata: Path) -> RecordingFormat | None:
@@ -269,8 +306,8 @@ def _storage_files(directory: Path) -> list[Path]:
 def _named_for_rosbags(
     path: Path, storage: RecordingFormat, index: int, scratch: Callable[[], Path]
 ) -> Path:
-    suffix = _SUFFIX[storage]
-    if path.suffix == suffix:
+    suffix = _SUFFIX.get(storage)
+    if suffix is None or path.suffix == suffix:  # the mcap library does not look at names
         return path
     link = scratch() / f"{index:04d}-{path.stem}{suffix}"
     os.symlink(path.resolve(), link)

@@ -2,8 +2,12 @@
 
 A scan is stamped at its start or its end depending on the driver, so "wholly inside" means
 `stamp - period >= stop start` and `stamp + period <= stop end`, with the period estimated from
-the LiDAR's own stamps. A stop is concatenated as soon as the stream has passed it, so memory
-holds the kept clouds plus one stop's worth of candidate scans, never the whole recording.
+the LiDAR's own stamps. Stamps are integer nanoseconds on the trajectory's clock (see `clocks`),
+and the test allows 1 % of the period, so a scan one period from a stop's edge is inside even
+when its driver rounded its stamp from float seconds (~100 ns off at today's epoch). A stop is
+concatenated as soon as the stream has passed it, so memory holds the kept clouds plus one stop's
+worth of candidate scans, never the whole recording; a scan of a stop already closed is counted
+late and left out.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.io.stops import StopSpan
+
+_EDGE_TOLERANCE_DIVISOR = 100  # a scan may reach past a stop's edge by 1 % of its period
 
 
 @dataclass
@@ -43,6 +49,7 @@ class StopClouds:
 
     `closed[k][frame]` is stop `k`'s cloud of that LiDAR once the stop is closed; a LiDAR with
     no scan stamped inside the stop has no entry. With `keep_points=False` only counts are kept.
+    `late[frame]`: scans that arrived after their stop was closed (left out of it).
     """
 
     def __init__(self, stops: Sequence[StopSpan], *, keep_points: bool = True) -> None:
@@ -52,6 +59,8 @@ class StopClouds:
         self._starts = [stop.t_start_ns for stop in self.stops]
         self._stamps: dict[str, list[int]] = defaultdict(list)
         self._pending: dict[int, dict[str, list[_Candidate]]] = {}
+        self._done: set[int] = set()
+        self.late: dict[str, int] = defaultdict(int)
 
     def stop_index(self, stamp_ns: int) -> int | None:
         """The stop whose span holds `stamp_ns`, if any: only such scans need decoding."""
@@ -65,6 +74,9 @@ class StopClouds:
         self._stamps[frame].append(stamp_ns)
         index = self.stop_index(stamp_ns)
         if index is None or points is None:
+            return
+        if index in self._done:
+            self.late[frame] += 1
             return
         kept = points if self.keep_points else None
         per_frame = self._pending.setdefault(index, {})
@@ -87,12 +99,13 @@ class StopClouds:
 
     def _close(self, index: int) -> None:
         stop = self.stops[index]
+        self._done.add(index)
         for frame, candidates in self._pending.pop(index).items():
-            period = self.period_ns(frame)
+            reach = self.period_ns(frame) - self.period_ns(frame) // _EDGE_TOLERANCE_DIVISOR
             inside = [
                 c
                 for c in candidates
-                if c.stamp_ns - period >= stop.t_start_ns and c.stamp_ns + period <= stop.t_end_ns
+                if c.stamp_ns - reach >= stop.t_start_ns and c.stamp_ns + reach <= stop.t_end_ns
             ]
             points = None
             if self.keep_points:

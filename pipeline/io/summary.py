@@ -18,7 +18,10 @@ class LidarSummary:
 
     `points` counts every point published (`width * height`, valid or not); `period_s` is the
     median spacing of its scan stamps. `extrinsic_source` is `config`, `tf_static` or None.
-    `scan_pattern`: from its first scan's fields (see `pointcloud.scan_pattern`).
+    `scan_pattern`: from its first scan's fields, else from its first scans' points
+    (`scan_pattern`); `scan_pattern_basis` says which, in words.
+    `clock_offset_ns`: median `log time - header stamp` of its scans; `clock_shift_ns`: what was
+    added to its stamps to put them on the trajectory's clock (0 unless the clocks disagree).
     """
 
     frame: str
@@ -30,6 +33,9 @@ class LidarSummary:
     T_base_lidar: Matrix4 | None
     extrinsic_source: str | None
     scan_pattern: ScanPattern = ScanPattern.NON_REPETITIVE
+    scan_pattern_basis: str = ""
+    clock_offset_ns: int = 0
+    clock_shift_ns: int = 0
 
     @property
     def points_per_second(self) -> float:
@@ -39,7 +45,8 @@ class LidarSummary:
 
 @dataclass(frozen=True)
 class StopSummary:
-    """A stop: its span (ns), mean initial `T_odom_base` (4, 4), and each LiDAR's cloud."""
+    """A stop: its span (ns, on the log clock), mean initial `T_odom_base` (4, 4), and each
+    LiDAR's cloud."""
 
     index: int
     t_start_ns: int
@@ -55,6 +62,10 @@ class StopSummary:
     def t_end(self) -> float:
         return self.t_end_ns * 1e-9
 
+    @property
+    def duration_s(self) -> float:
+        return (self.t_end_ns - self.t_start_ns) * 1e-9
+
 
 @dataclass(frozen=True)
 class RecordingSummary:
@@ -62,6 +73,8 @@ class RecordingSummary:
 
     `format` is what the user gave (e.g. `zip`), `storage` what was inside (`mcap`, `sqlite3`,
     `ros1`). `notes` are things noticed while reading that the user should hear about.
+    `trajectory_clock_offset_ns`: median `log time - header stamp` of the trajectory; stops are
+    found on its header clock and reported on the log clock, shifted by this.
     """
 
     path: str
@@ -76,6 +89,7 @@ class RecordingSummary:
     lidars: tuple[LidarSummary, ...]
     stops: tuple[StopSummary, ...]
     notes: tuple[str, ...] = ()
+    trajectory_clock_offset_ns: int = 0
 
     @property
     def duration_s(self) -> float:

@@ -39,14 +39,32 @@ class WriterFormat(enum.StrEnum):
 class RecordingWriter:
     """Context manager writing one recording at `path` (which must not exist yet).
 
-    Timestamps are integer nanoseconds; the bag's receive time equals the header stamp.
+    Timestamps are integer nanoseconds. Every `stamp_ns` argument is the message's log time (the
+    bag's receive time); its header stamp is that plus `header_clock_offset_ns`: one offset for
+    every topic, or a mapping from topic to offset (topics not in it: 0). 0, the default, writes
+    header stamps equal to the log times. A negative offset writes a recording whose publishers
+    run on another clock than the recorder: simulated time (Gazebo, Isaac: header stamps from
+    0 s while `ros2 bag record` logs the wall clock), or one LiDAR's clock months behind.
+    `write_raw` messages keep the header their caller built.
     """
 
-    def __init__(self, path: Path, fmt: WriterFormat = WriterFormat.ROS2_MCAP) -> None:
+    def __init__(
+        self,
+        path: Path,
+        fmt: WriterFormat = WriterFormat.ROS2_MCAP,
+        *,
+        header_clock_offset_ns: int | Mapping[str, int] = 0,
+    ) -> None:
         self.path = Path(path)
         self.format = WriterFormat(fmt)
         if self.path.exists():
             raise RecordingError(f"{self.path} already exists; choose a new output path")
+        self._header_offsets: Mapping[str, int] = (
+            {} if isinstance(header_clock_offset_ns, int) else dict(header_clock_offset_ns)
+        )
+        self._header_offset = (
+            header_clock_offset_ns if isinstance(header_clock_offset_ns, int) else 0
+        )
         self._ros1 = self.format is WriterFormat.ROS1
         self._store = ros1_typestore() if self._ros1 else ros2_typestore()
         self._writer: rosbag1.Writer | rosbag2.Writer
@@ -107,7 +125,7 @@ class RecordingWriter:
         offsets = {name: int(spec[1]) for name, spec in (record.dtype.fields or {}).items()}
         point_field = self._store.types["sensor_msgs/msg/PointField"]
         msg = self._store.types[POINTCLOUD2](
-            header=self._header(stamp_ns, frame_id),
+            header=self._header(topic, stamp_ns, frame_id),
             height=1,
             width=len(points),
             fields=[
@@ -150,7 +168,7 @@ class RecordingWriter:
             angular=types["geometry_msgs/msg/Vector3"](*map(float, angular_velocity)),
         )
         msg = types[ODOMETRY](
-            header=self._header(stamp_ns, odom_frame),
+            header=self._header(topic, stamp_ns, odom_frame),
             child_frame_id=base_frame,
             pose=types["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
             twist=types["geometry_msgs/msg/TwistWithCovariance"](
@@ -171,12 +189,13 @@ class RecordingWriter:
         `edges` are `(parent, child, T_parent_child)`.
         """
         types = self._store.types
+        topic = "/tf_static" if static else "/tf"
         stamped = []
         for parent, child, T in edges:
             translation, quat = to_translation_xyzw(T)
             stamped.append(
                 types["geometry_msgs/msg/TransformStamped"](
-                    header=self._header(stamp_ns, parent),
+                    header=self._header(topic, stamp_ns, parent),
                     child_frame_id=child,
                     transform=types["geometry_msgs/msg/Transform"](
                         translation=types["geometry_msgs/msg/Vector3"](*translation.tolist()),
@@ -185,7 +204,7 @@ class RecordingWriter:
                 )
             )
         msg = types[TF_MESSAGE](transforms=stamped)
-        self._write("/tf_static" if static else "/tf", TF_MESSAGE, stamp_ns, msg)
+        self._write(topic, TF_MESSAGE, stamp_ns, msg)
 
     def write_raw(self, topic: str, msgtype: str, stamp_ns: int, msg: Any) -> None:
         """Any message of a type the type store knows (for tests of unrelated topics)."""
@@ -198,8 +217,15 @@ class RecordingWriter:
 
     # -- internals --------------------------------------------------------------------------
 
-    def _header(self, stamp_ns: int, frame_id: str) -> Any:
+    def _header(self, topic: str, log_ns: int, frame_id: str) -> Any:
+        """A `std_msgs/Header` stamped on the topic's header clock (`log_ns` plus its offset)."""
         types = self._store.types
+        stamp_ns = int(log_ns) + self._header_offsets.get(topic, self._header_offset)
+        if stamp_ns < 0:
+            raise RecordingError(
+                f"header_clock_offset_ns puts {topic}'s header stamp before 0 ({stamp_ns} ns at "
+                f"log time {log_ns} ns); choose an offset no more negative than -(first log time)"
+            )
         stamp = types["builtin_interfaces/msg/Time"](
             sec=int(stamp_ns // 1_000_000_000), nanosec=int(stamp_ns % 1_000_000_000)
         )

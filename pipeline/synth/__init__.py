@@ -4,7 +4,7 @@ In memory: `simulate_problem(name, seed)` -> `(CalibrationProblem, Truth)`; on d
 `write_recording(name, out_dir, seed)` and `load_truth(out_dir)`. Scenarios: `scenario_names()`.
 """
 
-from pipeline.synth.lidar_models import LidarModel, Mid70, SpinningLidar
+from pipeline.synth.lidar_models import LidarModel, Mid70, Mid360, SpinningLidar
 from pipeline.synth.recording import write_recording
 from pipeline.synth.scenarios import LidarMount, ScenarioSpec, get_scenario, scenario_names
 from pipeline.synth.simulate import LabelledScan, World, make_world, scan, simulate_problem
@@ -16,6 +16,7 @@ __all__ = [
     "LidarMount",
     "LidarTruth",
     "Mid70",
+    "Mid360",
     "PointLabels",
     "ScanLabels",
     "ScenarioSpec",

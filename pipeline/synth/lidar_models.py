@@ -101,6 +101,78 @@ class Mid70(BaseModel):
         return Firing(times=t, directions=directions)
 
 
+class Mid360(BaseModel):
+    """Livox Mid-360-like head: 360 deg of azimuth x `elevation_deg`, non-repetitive.
+
+    `lasers` beams fire in turn, each sweeping its own slice of the elevation band with a fast
+    sinusoid while the head spins; the two rates are incommensurate with each other and with the
+    scan period, so the traces shift from one revolution to the next and the band keeps filling
+    in with integration time. With `line_field` the driver publishes each point's laser as
+    `line` (uint8), as Livox's driver does.
+    """
+
+    model_config = _FROZEN
+
+    kind: Literal["livox-mid360"] = "livox-mid360"
+    elevation_deg: tuple[float, float] = (-7.0, 52.0)
+    points_per_second: float = Field(default=200_000.0, gt=0)
+    lasers: int = Field(default=4, ge=1)
+    spin_hz: float = Field(default=77.3, gt=0, description="head revolutions per second")
+    sweep_hz: float = Field(default=1237.1, gt=0, description="elevation sweeps per second")
+    scan_period_s: float = Field(default=0.1, gt=0)
+    min_range_m: float = Field(default=0.1, ge=0)
+    max_range_m: float = Field(default=40.0, gt=0)
+    range_noise_m: float = Field(default=0.02, ge=0)
+    footprint_deg: float = Field(default=0.5, ge=0)
+    line_field: bool = True
+
+    @property
+    def optical_axis(self) -> NDArray[np.float64]:
+        """Azimuth 0 at the middle of the elevation band (the head has no single axis)."""
+        elevation = math.radians(sum(self.elevation_deg) / 2.0)
+        return np.array([math.cos(elevation), 0.0, math.sin(elevation)])
+
+    @property
+    def scan_pattern(self) -> ScanPattern:
+        return ScanPattern.NON_REPETITIVE
+
+    def point_fields(self, points: NDArray[np.float64]) -> dict[str, NDArray[np.generic]]:
+        """`line`: the laser whose slice of the band the point's elevation lies in."""
+        if not self.line_field:
+            return {}
+        low, high = self.elevation_deg
+        elevation = np.degrees(np.arctan2(points[:, 2], np.hypot(points[:, 0], points[:, 1])))
+        line = np.clip(np.floor((elevation - low) / (high - low) * self.lasers), 0, self.lasers - 1)
+        return {"line": line.astype(np.uint8)}
+
+    def rate(self, rate_scale: float = 1.0) -> float:
+        return self.points_per_second * rate_scale
+
+    def firing(self, t0: float, duration: float, rate_scale: float = 1.0) -> Firing:
+        """Rays fired in `[t0, t0 + duration)`; `rate_scale` thins the firings, not the pattern."""
+        t = _grid_times(t0, duration, self.rate(rate_scale))
+        # The laser follows the firing's index on the global grid, not its index in this span.
+        laser = np.rint(t * self.rate(rate_scale)).astype(np.int64) % self.lasers
+        low, high = (math.radians(v) for v in self.elevation_deg)
+        width = (high - low) / self.lasers
+        sweep = 0.5 + 0.5 * np.sin(2.0 * math.pi * self.sweep_hz * t + laser)
+        elevation = low + width * (laser + sweep)
+        azimuth = 2.0 * math.pi * self.spin_hz * t
+        directions = np.column_stack(
+            [
+                np.cos(elevation) * np.cos(azimuth),
+                np.cos(elevation) * np.sin(azimuth),
+                np.sin(elevation),
+            ]
+        )
+        return Firing(times=t, directions=directions)
+
+
+BeamField = Literal["ring", "channel", "laser_id"]
+"""Names drivers give the per-point beam index: `ring` (Velodyne, Ouster, Hesai drivers),
+`channel` (Autoware's nebula), `laser_id` (Luminar)."""
+
+
 class SpinningLidar(BaseModel):
     """Spinning multi-beam LiDAR (Velodyne-like): `beams` fixed elevations swept in azimuth.
 
@@ -120,6 +192,9 @@ class SpinningLidar(BaseModel):
     max_range_m: float = Field(default=40.0, gt=0)
     range_noise_m: float = Field(default=0.03, ge=0)
     footprint_deg: float = Field(default=0.4, ge=0)
+    beam_field: BeamField | None = Field(
+        default="ring", description="name of the per-point beam index field; None: no field"
+    )
 
     @model_validator(mode="after")
     def _check_mask(self) -> SpinningLidar:
@@ -140,13 +215,15 @@ class SpinningLidar(BaseModel):
         return ScanPattern.REPETITIVE
 
     def point_fields(self, points: NDArray[np.float64]) -> dict[str, NDArray[np.generic]]:
-        """`ring`: each point's beam index (uint16, 0 = lowest elevation), as spinning LiDARs'
+        """The beam index (uint16, 0 = lowest elevation) as `beam_field`, as spinning LiDARs'
         drivers publish it; recovered from the point's elevation (range noise keeps directions)."""
+        if self.beam_field is None:
+            return {}
         low, high = self.elevation_deg
         elevation = np.degrees(np.arctan2(points[:, 2], np.hypot(points[:, 0], points[:, 1])))
         step = (high - low) / max(self.beams - 1, 1)
         ring = np.clip(np.rint((elevation - low) / step), 0, self.beams - 1)
-        return {"ring": ring.astype(np.uint16)}
+        return {self.beam_field: ring.astype(np.uint16)}
 
     @property
     def optical_axis(self) -> NDArray[np.float64]:
@@ -184,5 +261,5 @@ class SpinningLidar(BaseModel):
         return Firing(times=np.repeat(column_times, self.beams), directions=directions)
 
 
-LidarModel = Annotated[Mid70 | SpinningLidar, Field(discriminator="kind")]
+LidarModel = Annotated[Mid70 | Mid360 | SpinningLidar, Field(discriminator="kind")]
 """Any scan model; each has `optical_axis`, `scan_period_s`, range limits and noise, `firing()`."""

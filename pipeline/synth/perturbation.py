@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial.transform import Rotation
 
@@ -34,3 +35,29 @@ def random_perturbation(rng: np.random.Generator, bounds: PerturbationBounds) ->
     axis /= np.linalg.norm(axis)
     angle = math.radians(bounds.rotation_deg) * rng.random()
     return make_transform(Rotation.from_rotvec(axis * angle).as_matrix(), translation)
+
+
+class PlanarDrift(BaseModel):
+    """Odometry drift that grows with the wheel travel: at the route's end the base-frame error
+    is exactly `translation_m` in the floor plane and `rotation_deg` about z (the direction and
+    the sense are drawn per seed); at a stop it is that share of both, as travelled so far."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    translation_m: float = Field(default=0.0, ge=0)
+    rotation_deg: float = Field(default=0.0, ge=0, le=180)
+
+
+def drift_errors(
+    rng: np.random.Generator, drift: PlanarDrift, fractions: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(K, 4, 4) planar errors at the travelled `fractions` (K,) in [0, 1] of the route."""
+    heading = rng.uniform(-math.pi, math.pi)
+    sense = 1.0 if rng.random() < 0.5 else -1.0
+    out = np.zeros((len(fractions), 4, 4))
+    angle = sense * math.radians(drift.rotation_deg) * fractions
+    out[:, :3, :3] = Rotation.from_euler("z", angle[:, None]).as_matrix()
+    out[:, 0, 3] = drift.translation_m * fractions * math.cos(heading)
+    out[:, 1, 3] = drift.translation_m * fractions * math.sin(heading)
+    out[:, 3, 3] = 1.0
+    return out

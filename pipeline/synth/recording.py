@@ -13,7 +13,7 @@ import contextlib
 import dataclasses
 import heapq
 import tarfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,9 +57,10 @@ def write_recording(
         )
     world = make_world(scenario, seed, rate_scale)
     out_dir.mkdir(parents=True, exist_ok=True)
-    writers = [RecordingWriter(out_dir / RECORDING_DIR, WriterFormat.ROS2_MCAP)]
+    offsets = world.spec.header_clock_offset_ns
+    writers = [_writer(out_dir / RECORDING_DIR, WriterFormat.ROS2_MCAP, offsets)]
     if ros1:
-        writers.append(RecordingWriter(out_dir / ROS1_FILE, WriterFormat.ROS1))
+        writers.append(_writer(out_dir / ROS1_FILE, WriterFormat.ROS1, offsets))
     labels: dict[str, list[LabelledScan]] = {mount.frame: [] for mount in world.spec.lidars}
     odometry = _odometry(world)
     with contextlib.ExitStack() as stack:
@@ -99,6 +100,11 @@ def archive_recording(out: Path, archive: Path) -> Path:
     with tarfile.open(archive, "w") as tar:
         tar.add(out / RECORDING_DIR, arcname=RECORDING_DIR)
     return archive
+
+
+def _writer(path: Path, fmt: WriterFormat, offsets: Mapping[str, int]) -> RecordingWriter:
+    """A writer whose header stamps are the log time plus the topic's offset in `offsets`."""
+    return RecordingWriter(path, fmt, header_clock_offset_ns=offsets)
 
 
 def _static_edges(world: World) -> list[tuple[str, str, Matrix4]]:

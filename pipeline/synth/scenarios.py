@@ -8,6 +8,7 @@ non-overlapping fields of view, tilted about 35 deg down, 16 stops rotating in p
 
 from __future__ import annotations
 
+import enum
 from functools import cache
 
 import numpy as np
@@ -15,8 +16,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from pipeline.errors import ConfigError
 from pipeline.synth.lidar_models import LidarModel, Mid70, SpinningLidar
-from pipeline.synth.motion import ArcMotion
-from pipeline.synth.perturbation import PerturbationBounds
+from pipeline.synth.motion import ArcMotion, Motion
+from pipeline.synth.perturbation import PerturbationBounds, PlanarDrift
 from pipeline.synth.scene import ObjectKind, Ring, SceneSpec
 from pipeline.synth.world_scenarios import world_scenarios
 from pipeline.transforms import Matrix4, from_xyz_rpy
@@ -59,6 +60,12 @@ class LidarMount(BaseModel):
         return from_xyz_rpy(self.xyz, np.radians(self.rpy_deg))
 
 
+class WorldKind(enum.StrEnum):
+    """The world round the robot (walls, people and uneven floors are further kinds)."""
+
+    OPEN_FLOOR = "open-floor"
+
+
 class ScenarioSpec(BaseModel):
     """Everything that defines a synthetic recording except the seed."""
 
@@ -68,9 +75,22 @@ class ScenarioSpec(BaseModel):
     description: str
     lidars: tuple[LidarMount, ...]
     scene: SceneSpec = SceneSpec()
-    motion: ArcMotion = ArcMotion()
+    motion: Motion = ArcMotion()
     extrinsic_error: PerturbationBounds = PerturbationBounds(translation_m=0.2, rotation_deg=5.0)
     odometry_error: PerturbationBounds = PerturbationBounds(translation_m=0.2, rotation_deg=3.0)
+    odometry_drift: PlanarDrift = Field(
+        default=PlanarDrift(),
+        description="error growing along the path, on top of the per-stop one",
+    )
+    header_clock_offset_ns: dict[str, int] = Field(
+        default_factory=dict,
+        description="per topic: header stamps = bag log time + offset (simulated time, a LiDAR "
+        "whose clock is off); topics not named have none",
+    )
+    world: WorldKind = WorldKind.OPEN_FLOOR
+    scenario_class: str = Field(
+        default="", description="benchmark class, e.g. routine/sensors/errors of a random draw"
+    )
     rate_scale: float = Field(default=1.0, gt=0, description="multiplies every LiDAR's point rate")
     odometry_hz: float = Field(default=50.0, gt=0)
     base_frame: str = "base_link"
@@ -243,5 +263,6 @@ def get_scenario(name: str) -> ScenarioSpec:
         return _registry()[name]
     except KeyError:
         raise ConfigError(
-            f"unknown scenario {name!r}; choose one of: {', '.join(scenario_names())}"
+            f"unknown scenario {name!r}; choose one of: {', '.join(scenario_names())} (or a "
+            "randomised one: `fleetcal synth random --seed N`, random_scenario(seed) in Python)"
         ) from None

@@ -64,11 +64,38 @@ class Ring(BaseModel):
         return self
 
 
-class SceneSpec(BaseModel):
-    """What the world holds; the seed decides the details (count, kind, size, place)."""
+class PlacedObject(BaseModel):
+    """An object whose every detail is given (a randomised scenario draws them itself): its kind,
+    `dimensions` as `SceneObject`'s, the centre of its footprint `xy` (m) and its yaw (deg); it
+    stands on the floor."""
 
     model_config = _FROZEN
 
+    kind: ObjectKind
+    dimensions: dict[str, float]
+    xy: tuple[float, float]
+    yaw_deg: float = 0.0
+    reflectivity: float = Field(default=0.6, gt=0, le=1)
+
+    @property
+    def height_m(self) -> float:
+        d = self.dimensions
+        if self.kind is ObjectKind.BOX:
+            return d["z"]
+        return d["height"] if self.kind is ObjectKind.CYLINDER else 2.0 * d["radius"]
+
+    def to_object(self) -> SceneObject:
+        T = from_xyz_rpy([*self.xy, self.height_m / 2.0], [0.0, 0.0, math.radians(self.yaw_deg)])
+        return SceneObject(self.kind, dict(self.dimensions), T, self.reflectivity)
+
+
+class SceneSpec(BaseModel):
+    """What the world holds; the seed decides the details (count, kind, size, place) of the
+    objects in `rings`; `objects` are placed as given."""
+
+    model_config = _FROZEN
+
+    objects: tuple[PlacedObject, ...] = ()
     object_kinds: tuple[ObjectKind, ...] = (ObjectKind.BOX,)
     rings: tuple[Ring, ...] = (Ring(r_min_m=1.0, r_max_m=2.6, count=(8, 12)),)
     object_height_m: float = Field(default=0.25, gt=0)
@@ -204,7 +231,7 @@ def place_objects(
     whether a footprint circle keeps clear of the room and the walkers' ways (None: no such).
     A ring's sector that a wall, shelf or walkway leaves no room in stays empty."""
     band = spec.robot_band(keep_out)
-    placed: list[SceneObject] = []
+    placed: list[SceneObject] = [obj.to_object() for obj in spec.objects]
     for ring in spec.rings:
         count = int(rng.integers(ring.count[0], ring.count[1] + 1))
         offset = rng.random() * 2.0 * math.pi

@@ -25,7 +25,7 @@ from pipeline.synth.dust import DustSpec, draw_dust
 from pipeline.synth.floor import draw_floor
 from pipeline.synth.lidar_models import LidarModel
 from pipeline.synth.motion import interpolate_drift
-from pipeline.synth.perturbation import random_perturbation
+from pipeline.synth.perturbation import drift_errors, random_perturbation
 from pipeline.synth.raycast import cast_with_footprint
 from pipeline.synth.room import Room, build_room
 from pipeline.synth.scenarios import ScenarioSpec, get_scenario
@@ -40,7 +40,8 @@ PoseFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
 _NS = 1_000_000_000
 _MAX_INTENSITY = 255.0
 # Stream ids that keep the random draws of one concern independent of the others.
-_SCENE, _SCAN, _EXTRINSICS, _ODOMETRY, _ROOM, _WALKERS, _FLOOR = 0, 1, 2, 3, 4, 5, 6
+_SCENE, _SCAN, _EXTRINSICS, _ODOMETRY, _DRIFT = 0, 1, 2, 3, 4
+_ROOM, _WALKERS, _FLOOR = 5, 6, 7
 
 
 @dataclass(frozen=True)
@@ -275,6 +276,8 @@ class World:
             ),
             objects=self.scene.objects,
             labels=labels or {},
+            scenario_class=self.spec.scenario_class,
+            spec=self.spec.model_dump(mode="json"),
             floor=self.scene.floor,
             walkers=self.scene.walkers,
         )
@@ -297,6 +300,10 @@ def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0)
     initial = tuple(T @ random_perturbation(rng, spec.extrinsic_error) for T in true)
     rng = np.random.default_rng([seed, _ODOMETRY])
     errors = np.stack([random_perturbation(rng, spec.odometry_error) for _ in range(motion.stops)])
+    travel = motion.travel_m(half_track_m=spec.scene.robot_size_m[1] / 2.0)
+    fractions = travel / travel[-1] if travel[-1] > 0 else np.zeros_like(travel)
+    drift = drift_errors(np.random.default_rng([seed, _DRIFT]), spec.odometry_drift, fractions)
+    errors = drift @ errors
     return World(
         spec=spec,
         seed=seed,
@@ -314,7 +321,7 @@ def _build_world_scene(
     """The scene `seed` draws: the room, the floor and the walkers (each from its own random
     stream, so an option left unset changes nothing else), then the objects clear of them."""
     scene_spec, motion = spec.scene, spec.motion
-    keep_out = (motion.radius_m, motion.radius_m)
+    keep_out = motion.radius_band_m()
     band = scene_spec.robot_band(keep_out)
     room = floor = None
     walkers: tuple[Walker, ...] = ()

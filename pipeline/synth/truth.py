@@ -2,8 +2,9 @@
 
 On disk (`write_recording`): `truth.json` beside a compressed `labels.npz`; `load_truth` reads
 both back. Layout of `labels.npz`, per LiDAR frame `F` (key names are `F/<name>`):
-  - `F/stamps_ns` (S,) int64: header stamp of each PointCloud2 message, in publication order
-    (the stamp is the time of the scan's first firing; the scan lasts `scan_period_s`);
+  - `F/stamps_ns` (S,) int64: bag log time of each PointCloud2 message, in publication order
+    (the time of the scan's first firing; the scan lasts `scan_period_s`); its header stamp is
+    the same plus the topic's `spec.header_clock_offset_ns`, where the scenario offsets it;
   - `F/offsets` (S + 1,) int64: message `s` holds points `offsets[s]:offsets[s + 1]` below;
   - `F/is_bleeding` (N,) bool: the point is a mixed return floating between two surfaces;
   - `F/object_index` (N,) int16: the object the point lies on (index into `objects`), -1 the floor,
@@ -13,6 +14,8 @@ both back. Layout of `labels.npz`, per LiDAR frame `F` (key names are `F/<name>`
 `truth.json` also holds the analytic floor (`floor`, null for the plane z = 0), the walkers' ways
 (`walkers`) and, per stop, the base's true height, roll and pitch on that floor (`base_on_floor`).
 Points keep the order of the message's data, so labels line up with a decoded cloud point by point.
+Stop times are on the bag's log clock too. `spec` holds the whole scenario (every drawn factor of
+a randomised one) and `scenario_class` its benchmark class.
 """
 
 from __future__ import annotations
@@ -142,6 +145,9 @@ class Truth:
     stops: tuple[StopTruth, ...]
     objects: tuple[SceneObject, ...]
     labels: Mapping[str, ScanLabels] = field(default_factory=dict)
+    scenario_class: str = ""
+    spec: Mapping[str, Any] = field(default_factory=dict)
+    """The whole `ScenarioSpec` as JSON: every factor the recording was drawn with."""
     floor: FloorSurface | None = None
     walkers: tuple[Walker, ...] = ()
 
@@ -214,6 +220,8 @@ class Truth:
                 for stop in self.stops
             ],
             "objects": [obj.to_json() for obj in self.objects],
+            "scenario_class": self.scenario_class,
+            "spec": dict(self.spec),
             "floor": None if self.floor is None else self.floor.to_json(),
             "walkers": [walker.to_json() for walker in self.walkers],
             "labels": {
@@ -222,8 +230,9 @@ class Truth:
                     frame: {name: f"{frame}/{name}" for name in _LABEL_ARRAYS}
                     for frame in self.labels
                 },
-                "layout": "per LiDAR frame F: F/stamps_ns (S,) int64 header stamps in message "
-                "order; F/offsets (S+1,) int64, message s holds points offsets[s]:offsets[s+1]; "
+                "layout": "per LiDAR frame F: F/stamps_ns (S,) int64 log times in message "
+                "order (header stamp = log time + spec.header_clock_offset_ns[topic]); "
+                "F/offsets (S+1,) int64, message s holds points offsets[s]:offsets[s+1]; "
                 "F/is_bleeding (N,) bool; F/object_index (N,) int16, -1 = floor, -2 = a walker "
                 "or dust; F/is_moving (N,) bool, on a walker; F/is_spurious (N,) bool, dust",
             },
@@ -318,6 +327,8 @@ def load_truth(out_dir: Path | str) -> Truth:
             for entry in doc["objects"]
         ),
         labels=labels,
+        scenario_class=doc.get("scenario_class", ""),
+        spec=doc.get("spec", {}),
         floor=None if doc.get("floor") is None else FloorSurface.from_json(doc["floor"]),
         walkers=tuple(Walker.from_json(entry) for entry in doc.get("walkers", [])),
     )

@@ -16,8 +16,12 @@ from service.problems import NotFound
 router = APIRouter(include_in_schema=False)
 
 _ASSETS = {
+    "format.js": "text/javascript; charset=utf-8",
+    "ticks.js": "text/javascript; charset=utf-8",
+    "drift.js": "text/javascript; charset=utf-8",
     "dashboard.js": "text/javascript; charset=utf-8",
     "dashboard.css": "text/css; charset=utf-8",
+    "favicon.svg": "image/svg+xml",
 }
 # Everything comes from this origin; images are blob: URLs the script makes from API responses.
 _SECURITY_HEADERS = {
@@ -40,6 +44,13 @@ def index() -> Response:
         media_type="text/html; charset=utf-8",
         headers={**_SECURITY_HEADERS, "Cache-Control": "no-cache"},
     )
+
+
+@router.get("/favicon.ico")
+def favicon() -> Response:
+    # Browsers ask for /favicon.ico on pages that name no icon (/docs, a bare API URL): the same
+    # SVG, which they accept whatever the name says.
+    return asset("favicon.svg")
 
 
 @router.get("/dashboard/{name}")

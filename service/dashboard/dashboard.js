@@ -111,17 +111,9 @@
 
   // -- formatting -------------------------------------------------------------------------------
 
-  function mm(metres) {
-    return metres === null || metres === undefined || !Number.isFinite(metres) ? "–" : `${(metres * 1000).toFixed(1)} mm`;
-  }
-
-  function deg(value, digits = 3) {
-    return value === null || value === undefined || !Number.isFinite(value) ? "–" : `${value.toFixed(digits)}°`;
-  }
-
-  function num(value, digits = 4) {
-    return value === null || value === undefined || !Number.isFinite(value) ? "–" : value.toFixed(digits);
-  }
+  // format.js, ticks.js and drift.js (loaded first) hold the pure logic; this file draws pages.
+  const { mm, deg, checkCells, stddevSummary } = fleetcal.format;
+  const { ofAccepted, rotationChangeDeg } = fleetcal.drift;
 
   function ago(iso) {
     if (!iso) return "–";
@@ -168,40 +160,17 @@
     return [roll, pitch, yaw].map((a) => (a * 180) / Math.PI);
   }
 
-  // Rotation vector (deg, about the LiDAR's own axes) of q0^-1 q1: the change from q0 to q1.
-  function rotationChangeDeg(q0, q1) {
-    const [ax, ay, az, aw] = [-q0[0], -q0[1], -q0[2], q0[3]];
-    const [bx, by, bz, bw] = q1;
-    let x = aw * bx + ax * bw + ay * bz - az * by;
-    let y = aw * by - ax * bz + ay * bw + az * bx;
-    let z = aw * bz + ax * by - ay * bx + az * bw;
-    let w = aw * bw - ax * bx - ay * by - az * bz;
-    if (w < 0) [x, y, z, w] = [-x, -y, -z, -w];
-    const norm = Math.hypot(x, y, z);
-    if (norm < 1e-15) return [0, 0, 0];
-    const angle = (2 * Math.atan2(norm, w) * 180) / Math.PI;
-    return [x, y, z].map((c) => (c / norm) * angle);
-  }
-
   // -- charts (inline SVG) ----------------------------------------------------------------------
-
-  function niceTicks(lo, hi, count = 5) {
-    const span = hi - lo || Math.abs(hi) || 1;
-    const raw = span / count;
-    const power = 10 ** Math.floor(Math.log10(raw));
-    const step = [1, 2, 5, 10].map((m) => m * power).find((v) => v >= raw) || 10 * power;
-    const ticks = [];
-    for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) ticks.push(Number(v.toPrecision(12)));
-    return ticks;
-  }
 
   // series: [{label, colour, points: [{t: Date, v, passed, runId}]}]; band: {lo, hi, label} or null.
   function timeChart({ id, title, unit, series, band, note }) {
     const W = 640, H = 230, L = 60, R = 14, T = 12, B = 34;
     const points = series.flatMap((x) => x.points);
     const times = points.map((p) => p.t.getTime());
-    let t0 = Math.min(...times), t1 = Math.max(...times);
-    if (t0 === t1) [t0, t1] = [t0 - 3600e3, t1 + 3600e3];
+    const first = Math.min(...times), last = Math.max(...times);
+    const around = first === last ? 3600e3 : 0; // one calibration: an hour either side of it
+    const axis = fleetcal.ticks.times(first - around, last + around);
+    const t0 = axis.start, t1 = axis.end;
     const values = points.map((p) => p.v).concat(band ? [band.lo, band.hi] : []);
     let v0 = Math.min(...values), v1 = Math.max(...values);
     const pad = (v1 - v0) * 0.12 || Math.abs(v1) * 0.2 || 1;
@@ -218,20 +187,16 @@
         s("text", { class: "band-label", x: W - R - 4, y: y(band.hi) - 4, "text-anchor": "end" }, band.label),
       );
     }
-    for (const v of niceTicks(v0, v1)) {
+    for (const v of fleetcal.ticks.values(v0, v1)) {
       svg.append(
         s("line", { class: "grid", x1: L, x2: W - R, y1: y(v), y2: y(v) }),
         s("text", { class: "tick", x: L - 6, y: y(v) + 4, "text-anchor": "end" }, `${v}`),
       );
     }
-    const tickCount = Math.min(5, new Set(times).size + 1);
-    for (let k = 0; k <= tickCount; k++) {
-      const t = t0 + ((t1 - t0) * k) / tickCount;
-      const date = new Date(t);
-      const label = t1 - t0 < 2 * 86400e3 ? date.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" }) : date.toLocaleDateString();
-      const anchor = k === 0 ? "start" : k === tickCount ? "end" : "middle";
-      svg.append(s("text", { class: "tick", x: x(t), y: H - B + 16, "text-anchor": anchor }, label));
-    }
+    axis.ticks.forEach(({ t, label }, k) => {
+      const anchor = k === 0 ? "start" : k === axis.ticks.length - 1 ? "end" : "middle";
+      svg.append(s("text", { class: "tick time-tick", x: x(t), y: H - B + 16, "text-anchor": anchor }, label));
+    });
     svg.append(
       s("line", { class: "axis", x1: L, x2: L, y1: T, y2: H - B }),
       s("line", { class: "axis", x1: L, x2: W - R, y1: H - B, y2: H - B }),
@@ -251,7 +216,7 @@
         svg.append(dot);
       }
     }
-    const legend = h("div", { class: "legend" }, series.map((line) => h("span", {}, swatch(line.colour), line.label)), h("span", { class: "muted" }, "● passed run  ○ failed run"));
+    const legend = h("div", { class: "legend" }, series.map((line) => h("span", {}, swatch(line.colour), line.label)), h("span", { class: "muted" }, "● an accepted calibration (click: its run)"));
     return h("figure", { class: "chart-box", id }, h("figcaption", {}, title), legend, svg, note ? h("p", { class: "muted small" }, note) : null);
   }
 
@@ -307,7 +272,7 @@
         "section",
         { class: "card narrow" },
         h("h1", {}, "fleetcal dashboard"),
-        h("p", {}, "Enter an API key with the read scope (", h("code", {}, "fleetcal keys create --scope read"), ", or the admin key ", h("code", {}, "fleetcal serve"), " printed on its first start). It is kept in this browser tab's session only."),
+        h("p", {}, "Enter an API key with the read scope (", h("code", {}, "fleetcal keys create --scope read --data-dir DIR"), " with the DIR the service runs on, or the admin key ", h("code", {}, "fleetcal serve"), " printed on its first start). It is kept in this browser tab's session only."),
         form,
         error,
       ),
@@ -315,48 +280,71 @@
     input.focus();
   }
 
+  const FLEET_PAGE = 200;
+
   async function overviewPage(my) {
     setCrumbs();
-    const [fleet, recent] = await Promise.all([api("/v1/fleet?limit=200"), api("/v1/runs?limit=10")]);
+    const [fleet, recent] = await Promise.all([api(`/v1/fleet?limit=${FLEET_PAGE}`), api("/v1/runs?limit=10")]);
     if (my !== generation) return;
-    const robots = fleet.items;
-    const latest = robots.map((r) => r.latest_run).filter(Boolean);
-    const count = (f) => latest.filter(f).length;
+    // The server counts the whole fleet; the table shows one page at a time.
+    const totals = fleet.totals;
     const tiles = h(
       "div",
-      { class: "tiles" },
-      tile("Robots", robots.length),
-      tile("Latest run passed", count((r) => r.passed === true), "pass"),
-      tile("Latest run failed", count((r) => r.status === "failed" || r.passed === false), "fail"),
-      tile("In progress", count((r) => r.status === "queued" || r.status === "running")),
+      { class: "tiles", id: "fleet-totals" },
+      tile("Robots", totals.robots, "", "robots"),
+      tile("Latest run passed", totals.latest_passed, "pass", "latest_passed"),
+      tile("Latest run failed", totals.latest_failed, "fail", "latest_failed"),
+      tile("In progress", totals.in_progress, "", "in_progress"),
+      tile("No accepted calibration", totals.robots - totals.with_accepted, "", "without_accepted"),
     );
-    const rows = robots.map((robot) => {
-      const run = robot.latest_run;
-      return h(
-        "tr",
-        { dataset: { robotId: robot.id } },
-        h("td", {}, h("a", { href: `#/robots/${encodeURIComponent(robot.id)}`, class: "robot-link" }, robot.id)),
-        h("td", {}, robot.model || h("span", { class: "muted" }, "–")),
-        h("td", {}, run ? [h("a", { href: `#/runs/${run.id}` }, `${run.kind.replaceAll("_", " ")} ${shortId(run.id)}`), " ", statusBadge(run.status)] : h("span", { class: "muted" }, "no run yet")),
-        h("td", {}, run ? verdictBadge(run.passed) : "–"),
-        h("td", { class: "num" }, run ? mm(run.metric_error_final) : "–"),
-        h("td", {}, run ? when(run.created_at) : "–"),
-        h("td", {}, robot.latest_calibration ? [h("a", { href: `#/runs/${robot.latest_calibration.run_id}` }, "accepted"), " ", when(robot.latest_calibration.measured_at)] : h("span", { class: "muted" }, "none yet")),
-      );
+    const body = h("tbody", {}, fleet.items.map(fleetRow));
+    let cursor = fleet.next_cursor;
+    const shown = h("p", { class: "muted", id: "fleet-shown" });
+    const more = h("button", { type: "button", id: "more-robots" }, "Load more robots");
+    const update = () => {
+      shown.textContent = `Showing ${body.children.length} of ${totals.robots} robots.`;
+      more.hidden = !cursor;
+    };
+    more.addEventListener("click", async () => {
+      more.disabled = true;
+      try {
+        const page = await api(`/v1/fleet${qs({ limit: FLEET_PAGE, cursor })}`);
+        cursor = page.next_cursor;
+        body.append(...page.items.map(fleetRow));
+      } finally {
+        more.disabled = false;
+        update();
+      }
     });
-    const table = robots.length
-      ? h("table", { id: "fleet" }, h("thead", {}, h("tr", {}, ["Robot", "Model", "Latest run", "Verdict", "Metric error", "Uploaded", "Calibration in use"].map((t) => h("th", {}, t)))), h("tbody", {}, rows))
+    update();
+    const table = fleet.items.length
+      ? h("table", { id: "fleet" }, h("thead", {}, h("tr", {}, ["Robot", "Model", "Latest run", "Verdict", "Metric error", "Uploaded", "Calibration in use"].map((t) => h("th", {}, t)))), body)
       : h("p", { class: "muted", id: "fleet-empty" }, "No robots yet. A robot appears when it uploads its first recording (POST /v1/robots/{id}/runs), e.g. with `fleetcal demo`.");
     show(
       h("h1", {}, "Fleet"),
       tiles,
-      h("section", { class: "card" }, h("h2", {}, "Robots"), table, fleet.next_cursor ? h("p", { class: "muted" }, "Showing the first 200 robots.") : null),
+      h("section", { class: "card" }, h("h2", {}, "Robots"), table, fleet.items.length ? [shown, more] : null),
       h("section", { class: "card" }, h("h2", {}, "Recent runs"), runTable(recent.items, true)),
     );
   }
 
-  function tile(label, value, kind) {
-    return h("div", { class: `tile ${kind || ""}` }, h("div", { class: "tile-value" }, value), h("div", { class: "tile-label" }, label));
+  function fleetRow(robot) {
+    const run = robot.latest_run;
+    return h(
+      "tr",
+      { dataset: { robotId: robot.id } },
+      h("td", {}, h("a", { href: `#/robots/${encodeURIComponent(robot.id)}`, class: "robot-link" }, robot.id)),
+      h("td", {}, robot.model || h("span", { class: "muted" }, "–")),
+      h("td", {}, run ? [h("a", { href: `#/runs/${run.id}` }, `${run.kind.replaceAll("_", " ")} ${shortId(run.id)}`), " ", statusBadge(run.status)] : h("span", { class: "muted" }, "no run yet")),
+      h("td", {}, run ? verdictBadge(run.passed) : "–"),
+      h("td", { class: "num" }, run ? mm(run.metric_error_final) : "–"),
+      h("td", {}, run ? when(run.created_at) : "–"),
+      h("td", {}, robot.latest_calibration ? [h("a", { href: `#/runs/${robot.latest_calibration.run_id}` }, "accepted"), " ", when(robot.latest_calibration.measured_at)] : h("span", { class: "muted" }, "none yet")),
+    );
+  }
+
+  function tile(label, value, kind, name) {
+    return h("div", { class: `tile ${kind || ""}`, dataset: { total: name } }, h("div", { class: "tile-value" }, value), h("div", { class: "tile-label" }, label));
   }
 
   function runTable(runs, withRobot) {
@@ -450,43 +438,49 @@
 
   function lidarHistory(frame, index, points, limits) {
     const colour = COLOURS[index % COLOURS.length];
-    const first = points.find((p) => p.passed) || points[0];
-    const base = first.passed ? "the first accepted calibration" : "the first run (none accepted yet)";
-    const changes = points.map((p) => ({
-      point: p,
-      t: new Date(p.measured_at),
-      dt: p.translation.map((v, k) => (v - first.translation[k]) * 1000),
-      dr: rotationChangeDeg(first.rotation_xyzw, p.rotation_xyzw),
-    }));
-    const last = changes.at(-1);
-    const driftMm = Math.hypot(...last.dt), driftDeg = Math.hypot(...last.dr);
+    const drift = ofAccepted(points);
+    const isReference = points.some((p) => p.is_reference);
+    const heading = h("h3", {}, swatch(colour), frame, isReference ? h("span", { class: "muted" }, " (reference)") : null);
+    const leftOut = drift.failed
+      ? h(
+          "p",
+          { class: "muted small left-out" },
+          `${drift.failed} failed run${drift.failed === 1 ? " is" : "s are"} left out: only accepted calibrations are compared.`,
+          drift.newestFailed ? [" The newest run (", h("a", { href: `#/runs/${drift.newestFailed.run_id}` }, shortId(drift.newestFailed.run_id)), `, failed ${ago(drift.newestFailed.measured_at)}) is one of them.`] : null,
+        )
+      : null;
+    if (!drift.latest) {
+      return h("article", { class: "lidar", dataset: { frame } }, heading, h("p", { class: "drift" }, "No accepted calibration yet: no drift to show."), leftOut);
+    }
+    const base = drift.changes.length > 1 ? "the first accepted calibration" : "the only accepted calibration";
     const tLimit = limits.max_translation_drift_m, rLimit = limits.max_rotation_drift_deg;
     const within = (value, limit) => (limit === undefined || limit === null ? null : value <= limit);
-    const tOk = within(driftMm / 1000, tLimit), rOk = within(driftDeg, rLimit);
-    const series = (key, labels) => labels.map((label, k) => ({ label, colour: AXIS_COLOURS[k], points: changes.map((c) => ({ t: c.t, v: c[key][k], passed: c.point.passed, runId: c.point.run_id })) }));
-    const [rx, ry, rz] = rpyDeg(last.point.rotation_xyzw);
+    const tOk = within(drift.translationMm / 1000, tLimit), rOk = within(drift.rotationDeg, rLimit);
+    const series = (key, labels) => labels.map((label, k) => ({ label, colour: AXIS_COLOURS[k], points: drift.changes.map((c) => ({ t: c.t, v: c[key][k], passed: true, runId: c.point.run_id })) }));
+    const latest = drift.latest;
     const judged = (ok) => (ok === null ? h("span", { class: "muted" }, "no limit") : h("span", { class: `badge ${ok ? "pass" : "fail"}` }, ok ? "within tolerance" : "over tolerance"));
     return h(
       "article",
       { class: "lidar", dataset: { frame } },
-      h("h3", {}, swatch(colour), frame, last.point.is_reference ? h("span", { class: "muted" }, " (reference)") : null),
+      heading,
       h(
         "p",
         {},
-        `Latest: t = [${last.point.translation.map((v) => v.toFixed(4)).join(", ")}] m, roll/pitch/yaw = [${[rx, ry, rz].map((v) => v.toFixed(3)).join(", ")}]° (T_base_lidar, ${ago(last.point.measured_at)}). `,
+        `Latest accepted: t = [${latest.translation.map((v) => v.toFixed(4)).join(", ")}] m, roll/pitch/yaw = [${rpyDeg(latest.rotation_xyzw).map((v) => v.toFixed(3)).join(", ")}]° (T_base_lidar, ${ago(latest.measured_at)}). `,
       ),
       h(
         "p",
         { class: "drift" },
         `Drift since ${base}: `,
-        h("strong", {}, `${driftMm.toFixed(1)} mm`),
-        tLimit ? ` (limit ${(tLimit * 1000).toFixed(1)} mm) ` : " ",
+        h("strong", { class: "drift-translation" }, mm(drift.translationMm / 1000)),
+        tLimit ? ` (limit ${mm(tLimit)}) ` : " ",
         judged(tOk),
         ", ",
-        h("strong", {}, `${driftDeg.toFixed(3)}°`),
-        rLimit ? ` (limit ${rLimit}°) ` : " ",
+        h("strong", { class: "drift-rotation" }, deg(drift.rotationDeg)),
+        rLimit ? ` (limit ${deg(rLimit)}) ` : " ",
         judged(rOk),
       ),
+      leftOut,
       h(
         "div",
         { class: "charts" },
@@ -495,7 +489,7 @@
           title: `${frame}: translation change since ${base} (base frame)`,
           unit: "mm",
           series: series("dt", ["Δx", "Δy", "Δz"]),
-          band: tLimit ? { lo: -tLimit * 1000, hi: tLimit * 1000, label: `drift tolerance ±${(tLimit * 1000).toFixed(1)} mm` } : null,
+          band: tLimit ? { lo: -tLimit * 1000, hi: tLimit * 1000, label: `drift tolerance ±${mm(tLimit)}` } : null,
           note: tLimit ? null : "The tolerance profile sets no translation drift limit.",
         }),
         timeChart({
@@ -503,7 +497,7 @@
           title: `${frame}: rotation change since ${base} (about the LiDAR's axes)`,
           unit: "deg",
           series: series("dr", ["about x", "about y", "about z"]),
-          band: rLimit ? { lo: -rLimit, hi: rLimit, label: `drift tolerance ±${rLimit}°` } : null,
+          band: rLimit ? { lo: -rLimit, hi: rLimit, label: `drift tolerance ±${deg(rLimit)}` } : null,
           note: rLimit ? null : "The tolerance profile sets no rotation drift limit.",
         }),
       ),
@@ -511,6 +505,8 @@
   }
 
   async function runPage(runId, my) {
+    // Before the request: an error page (unknown run, no access) names what was asked for.
+    setCrumbs([`run ${shortId(runId)}`, null]);
     const run = await api(`/v1/runs/${runId}`);
     if (my !== generation) return;
     setCrumbs([run.robot_id, `#/robots/${encodeURIComponent(run.robot_id)}`], [`run ${shortId(run.id)}`, null]);
@@ -598,17 +594,18 @@
         h(
           "tbody",
           {},
-          (verdict.checks || []).map((check) =>
-            h(
+          (verdict.checks || []).map((check) => {
+            const cells = checkCells(check);
+            return h(
               "tr",
               { class: check.passed ? "" : "failed-row", dataset: { check: check.name } },
               h("td", {}, h("code", {}, check.name)),
-              h("td", { class: "num" }, typeof check.value === "number" ? num(check.value, 5) : "–"),
-              h("td", { class: "num" }, typeof check.limit === "number" ? num(check.limit, 5) : "–"),
+              h("td", { class: "num check-value" }, cells.value),
+              h("td", { class: "num check-limit" }, cells.limit),
               h("td", {}, h("span", { class: `badge ${check.passed ? "pass" : "fail"}` }, check.passed ? "pass" : "fail")),
               h("td", {}, check.detail || ""),
-            ),
-          ),
+            );
+          }),
         ),
       ),
     );
@@ -655,7 +652,7 @@
       h(
         "table",
         {},
-        h("thead", {}, h("tr", {}, ["LiDAR", "Initial", "Calibrated", "Change", "Std. dev."].map((t) => h("th", {}, t)))),
+        h("thead", {}, h("tr", {}, ["LiDAR", "Initial", "Calibrated", "Change", "Std. dev. (1σ)"].map((t) => h("th", {}, t)))),
         h(
           "tbody",
           {},
@@ -663,15 +660,19 @@
             const lidar = doc.lidars[frame];
             const cal = lidar.calibrated, init = lidar.initial;
             const change = cal && init ? [Math.hypot(...cal.translation.map((v, k) => v - init.translation[k])), Math.hypot(...rotationChangeDeg(init.rotation_xyzw, cal.rotation_xyzw))] : null;
-            const sd = lidar.stddev;
+            const sd = stddevSummary(lidar, frame === doc.reference_frame);
             return h(
               "tr",
               { dataset: { frame } },
               h("td", {}, swatch(COLOURS[i % COLOURS.length]), frame, frame === doc.reference_frame ? h("span", { class: "muted" }, " (reference)") : null),
               h("td", { class: "mono" }, pose(init)),
-              h("td", { class: "mono" }, cal ? pose(cal) : h("span", { class: "badge fail" }, `undetermined${lidar.undetermined ? `: ${lidar.undetermined}` : ""}`)),
+              h("td", { class: "mono" }, cal ? pose(cal) : h("span", { class: "badge fail" }, (lidar.undetermined || []).length ? `not calibrated: ${lidar.undetermined.join(", ")} undetermined` : "not calibrated")),
               h("td", { class: "num" }, change ? `${mm(change[0])}, ${deg(change[1])}` : "–"),
-              h("td", { class: "num" }, sd && sd.translation_m ? `${mm(Math.max(...sd.translation_m))}, ${deg(Math.max(...sd.rotation_deg))}` : "–"),
+              h(
+                "td",
+                { class: "num stddev" },
+                sd.undetermined.length ? [h("span", { class: "badge fail undetermined" }, `undetermined: ${sd.undetermined.join(", ")}`), sd.text ? h("div", { class: "muted small" }, `others ${sd.text}`) : null] : sd.text || "–",
+              ),
             );
           }),
         ),
@@ -783,7 +784,11 @@
     try {
       if ((match = path.match(/^\/robots\/([^/]+)$/))) await robotPage(decodeURIComponent(match[1]), my);
       else if ((match = path.match(/^\/runs\/([0-9a-f-]{36})$/))) await runPage(match[1], my);
-      else await overviewPage(my);
+      else if (path === "/") await overviewPage(my);
+      else {
+        setCrumbs([path, null]);
+        throw new ApiError(404, { title: "No such page", detail: `The dashboard has no page ${path}: pages are the fleet (#/), a robot (#/robots/ID) and a run (#/runs/UUID).` });
+      }
     } catch (err) {
       if (my === generation) showError(err);
     }

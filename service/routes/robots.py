@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import APIRouter, Query, Response
-from pydantic import AwareDatetime, TypeAdapter
+from pydantic import TypeAdapter
 from sqlalchemy.orm import Session
 
 from service import repository
@@ -16,13 +16,15 @@ from service.pagination import (
     PAGE_SIZE_DEFAULT,
     PAGE_SIZE_MAX,
     cursor_datetime,
+    cursor_robot_id,
+    cursor_row_id,
     decode_cursor,
     encode_cursor,
 )
+from service.parameters import CursorQuery, FrameQuery, SinceQuery, UntilQuery
 from service.problems import (
     PROBLEM_RESPONSES,
     Forbidden,
-    InvalidCursor,
     NoCalibration,
     RobotNotFound,
 )
@@ -50,7 +52,7 @@ def list_robots(
     _: ReadKey,
     session: SessionDep,
     limit: Annotated[int, Query(ge=1, le=PAGE_SIZE_MAX)] = PAGE_SIZE_DEFAULT,
-    cursor: Annotated[str | None, Query(max_length=512)] = None,
+    cursor: CursorQuery = None,
 ) -> RobotPage:
     robots, next_cursor = robots_page(session, limit, cursor)
     return RobotPage(items=[robot_public(r) for r in robots], next_cursor=next_cursor)
@@ -125,20 +127,18 @@ def get_history(
     robot_id: RobotIdPath,
     principal: CurrentKey,
     session: SessionDep,
-    frame: Annotated[str | None, Query(max_length=128, description="One LiDAR frame.")] = None,
+    frame: FrameQuery = None,
     passed: Annotated[bool | None, Query(description="true: accepted calibrations only.")] = None,
-    since: Annotated[AwareDatetime | None, Query(description="Uploaded at or after.")] = None,
-    until: Annotated[AwareDatetime | None, Query(description="Uploaded before.")] = None,
+    since: SinceQuery = None,
+    until: UntilQuery = None,
     limit: Annotated[int, Query(ge=1, le=HISTORY_LIMIT_MAX)] = HISTORY_LIMIT_DEFAULT,
-    cursor: Annotated[str | None, Query(max_length=512)] = None,
+    cursor: CursorQuery = None,
 ) -> HistoryPage:
     _check_readable(principal, robot_id)
     after = None
     if cursor is not None:
-        measured, row_id = decode_cursor(cursor, "history", 2)
-        if not row_id.isdigit():
-            raise InvalidCursor("the cursor is damaged; start again without a cursor")
-        after = (cursor_datetime(measured), int(row_id))
+        measured, row_id = decode_cursor(cursor, "history", cursor_datetime, cursor_row_id)
+        after = (measured, row_id)
     rows = repository.history(
         session,
         robot_id,
@@ -162,7 +162,7 @@ def get_history(
 
 def robots_page(session: Session, limit: int, cursor: str | None) -> tuple[list[Robot], str | None]:
     """Up to `limit` robots by id after `cursor`, and the cursor of the next page (None: last)."""
-    after = decode_cursor(cursor, "robots", 1)[0] if cursor is not None else None
+    after = decode_cursor(cursor, "robots", cursor_robot_id)[0] if cursor is not None else None
     robots = repository.list_robots(session, limit=limit + 1, after_id=after)
     next_cursor = encode_cursor("robots", robots[limit - 1].id) if len(robots) > limit else None
     return robots[:limit], next_cursor

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import uuid
-from typing import Annotated, Any
+from typing import Annotated
 
 import anyio
 from anyio import to_thread
 from fastapi import APIRouter, Header, Query, Request, Response
-from pydantic import AwareDatetime
 from sqlalchemy.exc import IntegrityError
 
 from service import repository
@@ -19,21 +17,22 @@ from service.pagination import (
     PAGE_SIZE_DEFAULT,
     PAGE_SIZE_MAX,
     cursor_datetime,
+    cursor_uuid,
     decode_cursor,
     encode_cursor,
 )
+from service.parameters import CursorQuery, SinceQuery, UntilQuery
 from service.problems import (
     PROBLEM_RESPONSES,
     ApiError,
     Forbidden,
     IdempotencyKeyReused,
-    InvalidConfig,
-    InvalidCursor,
     InvalidHeader,
     Problem,
     RobotNotFound,
     RunNotFound,
 )
+from service.run_config import parse_run_config
 from service.schemas import ROBOT_ID_PATTERN, RunPage, RunPublic, RunSummary, UploadInfo
 from service.uploads import stream_to_storage
 
@@ -97,7 +96,8 @@ async def upload_run(
             alias="X-Fleetcal-Config",
             max_length=MAX_CONFIG_HEADER_CHARS,
             description="Calibration config as a JSON object (reference LiDAR, initial "
-            "extrinsics, ...), checked by the worker.",
+            "extrinsics, ...): a `PipelineConfig` without `verdict`; an invalid one is refused "
+            "(422).",
         ),
     ] = None,
 ) -> RunPublic:
@@ -105,7 +105,7 @@ async def upload_run(
     then record the run as `queued` in the same transaction as the upload."""
     if not principal.may_upload_for(robot_id):
         raise Forbidden(f"this key may not upload for robot {robot_id!r}")
-    parsed_config = _parse_config(config)
+    parsed_config = parse_run_config(config)
     declared_length = _content_length(request)
     settings = services.settings
 
@@ -181,18 +181,15 @@ def list_runs(
         bool | None, Query(description="Verdict; runs without a result never match.")
     ] = None,
     kind: RunKind | None = None,
-    since: Annotated[AwareDatetime | None, Query(description="Uploaded at or after.")] = None,
-    until: Annotated[AwareDatetime | None, Query(description="Uploaded before.")] = None,
+    since: SinceQuery = None,
+    until: UntilQuery = None,
     limit: Annotated[int, Query(ge=1, le=PAGE_SIZE_MAX)] = PAGE_SIZE_DEFAULT,
-    cursor: Annotated[str | None, Query(max_length=512)] = None,
+    cursor: CursorQuery = None,
 ) -> RunPage:
     after = None
     if cursor is not None:
-        created, run_id = decode_cursor(cursor, "runs", 2)
-        try:
-            after = (cursor_datetime(created), uuid.UUID(run_id))
-        except ValueError as err:
-            raise InvalidCursor("the cursor is damaged; start again without a cursor") from err
+        created, run_id = decode_cursor(cursor, "runs", cursor_datetime, cursor_uuid)
+        after = (created, run_id)
     where = repository.RunFilter(
         robot_id=robot_id, status=status, kind=kind, passed=passed, since=since, until=until
     )
@@ -240,18 +237,6 @@ def run_public(run: Run, result: Result | None) -> RunPublic:
         result=result.document if result else None,
         error=Problem.model_validate(run.error) if run.error else None,
     )
-
-
-def _parse_config(raw: str | None) -> dict[str, Any] | None:
-    if raw is None:
-        return None
-    try:
-        value = json.loads(raw)
-    except ValueError as err:
-        raise InvalidConfig(f"X-Fleetcal-Config is not valid JSON: {err}") from err
-    if not isinstance(value, dict):
-        raise InvalidConfig("X-Fleetcal-Config must be a JSON object")
-    return value
 
 
 def _content_length(request: Request) -> int | None:

@@ -40,12 +40,17 @@ from collections import defaultdict  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import TYPE_CHECKING  # noqa: E402
 
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
+from pipeline.config import PipelineConfig  # noqa: E402
 from pipeline.problem import CalibrationProblem  # noqa: E402
 from pipeline.synth.truth import Truth  # noqa: E402
+
+if TYPE_CHECKING:
+    from pipeline.calibrate import CalibrationResult
 
 CASES = (
     "set1-box",
@@ -96,6 +101,48 @@ def _errors(
     return [p[0] for p in pairs], [p[1] for p in pairs]
 
 
+def true_T_ref_lidar(truth: Truth, frames: Sequence[str]) -> NDArray[np.float64]:
+    """(L, 4, 4) true `T_ref_lidar` of `frames`, the reference (`frames[0]`) first."""
+    from pipeline.transforms import invert
+
+    true = {lidar.frame: lidar.T_base_lidar_true for lidar in truth.lidars}
+    return np.stack([invert(true[frames[0]]) @ true[f] for f in frames])
+
+
+def calibration_errors(
+    result: CalibrationResult, truth: Truth
+) -> tuple[list[float], list[float], list[float], list[float]]:
+    """Per non-reference LiDAR of `result`, relative to its reference: the error of the
+    calibrated `T_ref_lidar` against the truth (m, deg) and the norm of the reported 1-sigma
+    (m, deg)."""
+    from pipeline.transforms import invert
+
+    reference = result.lidars[0].T_base_lidar_calibrated
+    estimate = np.stack([invert(reference) @ x.T_base_lidar_calibrated for x in result.lidars])
+    t, r = _errors(estimate, true_T_ref_lidar(truth, [x.frame for x in result.lidars]))
+    sigma_t = [float(np.linalg.norm(x.uncertainty.stddev_translation_m)) for x in result.lidars[1:]]
+    sigma_r = [float(np.linalg.norm(x.uncertainty.stddev_rotation_deg)) for x in result.lidars[1:]]
+    return t, r, sigma_t, sigma_r
+
+
+CONFIG_METHODS = ("proposed", "point_to_point", "with_stage1", "without_stage1")
+"""Methods that are the pipeline with another configuration."""
+
+
+def method_config(method: str) -> PipelineConfig:
+    """The configuration of one of `CONFIG_METHODS`."""
+    from pipeline.config import config_from_mapping, resolved
+
+    data = resolved(PipelineConfig())
+    if method == "point_to_point":
+        data["optimisation"]["residual"] = "point_to_point"
+    elif method in ("with_stage1", "without_stage1"):
+        data["denoise"]["enabled"] = method == "with_stage1"
+    elif method != "proposed":
+        raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
+    return config_from_mapping(data)
+
+
 def _history(
     per_iteration: NDArray[np.float64], truth: NDArray[np.float64]
 ) -> tuple[list[float], list[float]]:
@@ -126,15 +173,14 @@ def without_bleeding(problem: CalibrationProblem, truth: Truth) -> CalibrationPr
 def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict[str, Trial]:
     from pipeline.baselines import entire_cloud, without_rough_refinement
     from pipeline.calibrate import calibrate, order_lidars
-    from pipeline.config import PipelineConfig, config_from_mapping, resolved
+    from pipeline.config import config_from_mapping, resolved
     from pipeline.synth import simulate_problem
     from pipeline.transforms import invert
 
     problem, truth = simulate_problem(case, seed, rate)
     config = PipelineConfig()
     frames = [lidar.frame for lidar in order_lidars(problem, config.frames)]
-    true = {lidar.frame: lidar.T_base_lidar_true for lidar in truth.lidars}
-    T_true = np.stack([invert(true[frames[0]]) @ true[f] for f in frames])
+    T_true = true_T_ref_lidar(truth, frames)
     initial = {lidar.frame: lidar.T_base_lidar for lidar in problem.lidars}
     T_initial = np.stack([invert(initial[frames[0]]) @ initial[f] for f in frames])
     trials: dict[str, Trial] = {}
@@ -152,17 +198,10 @@ def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict
             stages: dict[str, float] = {}
             sigma_t: list[float] = []
             sigma_r: list[float] = []
+            t, r = _errors(estimate, T_true)
         else:
-            if method == "proposed":
-                result = calibrate(problem, config)
-            elif method == "point_to_point":
-                data = resolved(config)
-                data["optimisation"]["residual"] = "point_to_point"
-                result = calibrate(problem, config_from_mapping(data))
-            elif method in ("with_stage1", "without_stage1"):
-                data = resolved(config)
-                data["denoise"]["enabled"] = method == "with_stage1"
-                result = calibrate(problem, config_from_mapping(data))
+            if method in CONFIG_METHODS:
+                result = calibrate(problem, method_config(method))
             elif method == "labelled_stage1":
                 data = resolved(config)
                 data["denoise"]["enabled"] = False
@@ -171,21 +210,11 @@ def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict
                 result = without_rough_refinement(problem, config)
             else:
                 raise SystemExit(f"unknown method {method!r}; choose from {METHODS}")
-            reference = result.lidars[0].T_base_lidar_calibrated
-            estimate = np.stack(
-                [invert(reference) @ x.T_base_lidar_calibrated for x in result.lidars]
-            )
             optimisation = result.optimisation
             passed = result.passed
             stages = {name: report.seconds for name, report in result.stages.items()}
-            sigma_t = [
-                float(np.linalg.norm(x.uncertainty.stddev_translation_m)) for x in result.lidars[1:]
-            ]
-            sigma_r = [
-                float(np.linalg.norm(x.uncertainty.stddev_rotation_deg)) for x in result.lidars[1:]
-            ]
+            t, r, sigma_t, sigma_r = calibration_errors(result, truth)
         seconds = time.perf_counter() - started
-        t, r = _errors(estimate, T_true)
         history_t, history_r = _history(optimisation.T_ref_lidar_per_iteration, T_true)
         trials[method] = Trial(
             t,

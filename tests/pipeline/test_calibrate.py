@@ -99,12 +99,15 @@ def test_stage_1_keeps_masks_and_copies_a_filtered_cloud_only_when_asked() -> No
     assert np.count_nonzero(floor[1]) == np.count_nonzero(recorded_floor[1])
 
 
-def spinning(problem: CalibrationProblem, *frames: str) -> CalibrationProblem:
-    """`problem` with the LiDARs `frames` (all when none given) tagged as spinning ones."""
+def spinning(
+    problem: CalibrationProblem, *frames: str, pattern: ScanPattern = ScanPattern.REPETITIVE
+) -> CalibrationProblem:
+    """`problem` with the LiDARs `frames` (all when none given) tagged as spinning ones (or as
+    `pattern`)."""
     return dataclasses.replace(
         problem,
         lidars=tuple(
-            dataclasses.replace(lidar, scan_pattern=ScanPattern.REPETITIVE)
+            dataclasses.replace(lidar, scan_pattern=pattern)
             if not frames or lidar.frame in frames
             else lidar
             for lidar in problem.lidars
@@ -140,6 +143,19 @@ def test_progress_names_the_lidars_stage_1_left_alone() -> None:
     result = calibrate(spinning(box_problem()[0]), progress=progress)
     assert said["denoise"] == "lidar_front, lidar_rear not filtered (repetitive scans)"
     assert result.stages["denoise"].details["filtered_frames"] == ""
+
+
+def test_stage_1_leaves_a_lidar_of_unknown_pattern_alone_and_says_so() -> None:
+    problem = spinning(
+        spinning(box_problem()[0], "lidar_front"), "lidar_rear", pattern=ScanPattern.UNKNOWN
+    )
+    assert prepare(problem, PipelineConfig()).filtered_frames == ()
+    said: dict[str, str] = {}
+    calibrate(problem, progress=lambda stage, _, message: said.__setitem__(stage, message))
+    assert said["denoise"] == (
+        "lidar_front not filtered (repetitive scans); "
+        "lidar_rear not filtered (scan pattern unknown)"
+    )
 
 
 def test_stage_1_judges_only_what_stands_above_the_floor() -> None:

@@ -1,8 +1,10 @@
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.calibrate import calibrate
 from pipeline.config import PipelineConfig
-from pipeline.observability import ObservabilityConfig, level_rotation
+from pipeline.observability import ObservabilityConfig, jackknife_covariance, level_rotation
+from pipeline.optimisation import OptimisationResult, ParameterLayout
 from tests.pipeline.calibration_data import box_calibration, box_problem, floor_only_calibration
 
 
@@ -34,18 +36,78 @@ def test_a_bare_floor_leaves_x_y_and_yaw_undetermined_and_only_those() -> None:
     assert max(other.uncertainty.stddev_rotation_deg[:2]) < 0.1
 
 
-def test_reported_stddev_are_the_formal_ones_scaled_and_the_undetermined_judged_before() -> None:
+def test_the_jackknife_is_exact_leave_one_stop_out_on_a_linear_problem() -> None:
+    # Residuals linear in the parameters: one Gauss-Newton step from the solution without stop j
+    # lands exactly on the solution without stop j, so the jackknife must match brute force.
+    rng = np.random.default_rng(3)
+    layout = ParameterLayout(n_stops=5, n_lidars=2)
+    size = layout.size
+    rows = [rng.normal(size=(40, size)) for _ in range(layout.n_stops)]
+    targets = [rng.normal(size=40) for _ in range(layout.n_stops)]
+    prior = np.full(size, 0.5)
+
+    def solve(stops: list[int]) -> NDArray[np.float64]:
+        A = np.vstack([rows[j] for j in stops] + [np.diag(np.sqrt(prior))])
+        y = np.concatenate([targets[j] for j in stops] + [np.zeros(size)])
+        solution: NDArray[np.float64] = np.linalg.lstsq(A, y, rcond=None)[0]
+        return solution
+
+    everything = list(range(layout.n_stops))
+    theta = solve(everything)
+    H_j = np.stack([A.T @ A for A in rows])
+    # Gradients of the data terms at the solution; the prior's (centred on the solution) is 0.
+    b_j = np.stack([A.T @ (A @ theta - y) for A, y in zip(rows, targets, strict=True)])
+    result = OptimisationResult(
+        T_G_ref=np.tile(np.eye(4), (5, 1, 1)),
+        T_ref_lidar=np.tile(np.eye(4), (2, 1, 1)),
+        converged=True,
+        iterations=1,
+        error_per_iteration=(0.0,),
+        T_ref_lidar_per_iteration=np.tile(np.eye(4), (1, 2, 1, 1)),
+        information=H_j.sum(axis=0),
+        gradient=b_j.sum(axis=0),
+        stop_information=H_j,
+        stop_gradient=b_j,
+        variance_factor=1.0,
+        layout=layout,
+        correspondences=(0, 0),
+        residual_rms_m=0.0,
+        seconds=0.0,
+    )
+    # The brute-force solutions keep the prior centred on the full solution, as the jackknife.
+    left_out = []
+    for j in everything:
+        kept = [k for k in everything if k != j]
+        A = np.vstack([rows[k] for k in kept] + [np.diag(np.sqrt(prior))])
+        y = np.concatenate([targets[k] - rows[k] @ theta for k in kept] + [np.zeros(size)])
+        left_out.append(np.linalg.lstsq(A, y, rcond=None)[0])
+    offsets = np.array(left_out)
+    centred = offsets - offsets.mean(axis=0)
+    expected = (len(everything) - 1) / len(everything) * centred.T @ centred
+    covariance = jackknife_covariance(result, prior)
+    assert covariance is not None
+    np.testing.assert_allclose(covariance, expected, rtol=1e-8, atol=1e-12)
+
+
+def test_reported_stddev_come_from_the_jackknife_never_below_the_formal_ones() -> None:
     problem, _ = box_problem()
-    formal = ObservabilityConfig(stddev_scale_translation=1.0, stddev_scale_rotation=1.0)
-    scaled = ObservabilityConfig(stddev_scale_translation=7.0, stddev_scale_rotation=3.0)
     results = [
-        calibrate(problem, PipelineConfig(observability=config)) for config in (formal, scaled)
+        calibrate(problem, PipelineConfig(observability=ObservabilityConfig(method=method)))
+        for method in ("formal", "jackknife")
     ]
-    for plain, wide in zip(results[0].lidars, results[1].lidars, strict=True):
-        np.testing.assert_allclose(
-            wide.uncertainty.stddev_translation_m, 7.0 * plain.uncertainty.stddev_translation_m
+    wider = 0
+    for formal, measured in zip(results[0].lidars, results[1].lidars, strict=True):
+        assert np.all(
+            measured.uncertainty.stddev_translation_m >= formal.uncertainty.stddev_translation_m
         )
-        np.testing.assert_allclose(
-            wide.uncertainty.stddev_rotation_deg, 3.0 * plain.uncertainty.stddev_rotation_deg
+        assert np.all(
+            measured.uncertainty.stddev_rotation_deg >= formal.uncertainty.stddev_rotation_deg
         )
-        assert wide.uncertainty.undetermined == plain.uncertainty.undetermined
+        wider += int(
+            np.any(
+                measured.uncertainty.stddev_translation_m > formal.uncertainty.stddev_translation_m
+            )
+        )
+        assert measured.uncertainty.undetermined == formal.uncertainty.undetermined
+    # The residuals of a surface patch are correlated: the data's own spread is wider.
+    assert wider == len(results[0].lidars) - 1

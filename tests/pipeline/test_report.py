@@ -5,6 +5,7 @@ each LiDAR in its own colour in both panels."""
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,14 +18,18 @@ from pipeline.problem import CalibrationProblem
 from pipeline.report import (
     REPORT_IMAGES,
     ReportInput,
+    convergence_note,
+    figures,
     floor_height,
     lidar_colour,
+    map_extent,
     map_poses,
     render,
     report_input,
+    robot_surroundings,
 )
 from pipeline.synth import Truth, simulate_problem
-from pipeline.transforms import invert
+from pipeline.transforms import from_xyz_rpy, invert
 
 
 @pytest.fixture(scope="module")
@@ -176,8 +181,6 @@ def test_both_panels_show_each_lidar_in_its_own_colour(
 
 
 def test_no_iterations_still_renders(truth_input: ReportInput) -> None:
-    from dataclasses import replace
-
     unknown = replace(truth_input, error_per_iteration=(), passed=None, converged=None)
     assert decoded(render(unknown, names=["error"])["error"]).shape[1] >= 800
 
@@ -185,3 +188,86 @@ def test_no_iterations_still_renders(truth_input: ReportInput) -> None:
 def test_an_unknown_image_name_is_refused(truth_input: ReportInput) -> None:
     with pytest.raises(ValueError, match=r"no report image \['map-3d'\]"):
         render(truth_input, names=["map-3d"])
+
+
+# -- a failed calibration -------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def diverged_input(truth_input: ReportInput) -> ReportInput:
+    """A calibration that diverged: the rear LiDAR's map thrown 55 m away and turned, as a
+    failed run's result can place it."""
+    T_W_lidar_after = truth_input.T_W_lidar_after.copy()
+    T_W_lidar_after[1] = from_xyz_rpy([48.0, -27.0, 0.0], [0.0, 0.0, 1.0]) @ T_W_lidar_after[1]
+    return replace(
+        truth_input, T_W_lidar_after=T_W_lidar_after, metric_error_final=0.1, passed=False
+    )
+
+
+def width(extent: tuple[float, float, float, float]) -> float:
+    return extent[1] - extent[0]
+
+
+def test_a_failed_calibration_keeps_the_robots_surroundings_in_view(
+    truth_input: ReportInput, diverged_input: ReportInput
+) -> None:
+    good, failed = map_extent(truth_input), map_extent(diverged_input)
+    # The tiny scene is about 5 m across; the diverged map made the view 60 m wide.
+    assert 3 < width(good) < 8
+    assert width(failed) < 1.5 * width(good), failed
+    path = diverged_input.T_W_lidar_before[:, :, :2, 3].reshape(-1, 2)
+    x0, x1, y0, y1 = failed
+    assert np.all((path >= [x0, y0]) & (path <= [x1, y1]))
+    window = robot_surroundings(diverged_input)
+    assert window[0] < x0 and x1 < window[1]
+
+
+def test_a_failed_calibrations_before_map_is_drawn_at_full_scale(
+    images: dict[str, bytes], diverged_input: ReportInput
+) -> None:
+    def before_panel(data: bytes) -> np.ndarray:
+        rgb = decoded(data)
+        return rgb[:, : rgb.shape[1] // 2]
+
+    good = before_panel(images["map-top"])
+    failed = before_panel(render(diverged_input, names=["map-top"])["map-top"])
+    for i in range(len(diverged_input.frames)):
+        assert pixels_of(failed, lidar_colour(i)) > 0.5 * pixels_of(good, lidar_colour(i)), i
+
+
+def test_the_after_panel_counts_the_points_thrown_out_of_view(
+    truth_input: ReportInput, diverged_input: ReportInput
+) -> None:
+    def notes(data: ReportInput) -> list[str]:
+        top = figures(data, names=["map-top"])["map-top"]
+        return [text.get_text() for axes in top.axes for text in axes.texts]
+
+    assert notes(truth_input) == []
+    (note,) = notes(diverged_input)
+    # The rear LiDAR's half of the points, about 55 m away from the robot's surroundings.
+    assert "% of the points lie beyond the robot's surroundings" in note
+    assert note.startswith("50% of") and "up to 53 m" in note
+
+
+# -- the convergence plot -----------------------------------------------------------------------
+
+
+def test_the_error_curve_ends_at_the_reported_metric_or_says_why_not(
+    truth_input: ReportInput,
+) -> None:
+    # The fixture's curve ends at 1.50 mm, its metric error is 1.50 mm: nothing to explain.
+    assert convergence_note(truth_input) is None
+    differs = replace(truth_input, metric_error_final=0.0021)
+    note = convergence_note(differs)
+    assert note is not None
+    assert note.startswith("The curve ends at 1.50 mm, the reported metric error is 2.10 mm")
+    assert "eq. 11" in note and "eq. 12" in note
+    figure = figures(differs, names=["error"])["error"]
+    (axes,) = figure.axes
+    assert "The curve ends at 1.50 mm" in axes.get_xlabel()
+    labels = [line.get_label() for line in axes.get_lines()]
+    assert "reported metric error (eq. 12): 2.10 mm" in labels
+    assert [text.get_text() for text in axes.texts] == ["1.50 mm"]
+    unmeasured = replace(truth_input, metric_error_final=float("nan"))
+    assert "no metric error was measured" in (convergence_note(unmeasured) or "")
+    assert convergence_note(replace(truth_input, error_per_iteration=())) is None

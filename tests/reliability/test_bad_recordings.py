@@ -30,7 +30,7 @@ CASES: dict[str, tuple[Callable[[], bytes], dict[str, Any] | None, str, str | No
         "truncated or damaged",
     ),
     "truncated-ros1": (recordings.ros1_truncated, QUICK, "corrupt-recording", "read", "rosbag"),
-    "empty-mcap": (recordings.empty_mcap, QUICK, "no-point-cloud", "read", "no sensor_msgs"),
+    "empty-mcap": (recordings.empty_mcap, QUICK, "empty-recording", "read", "holds no message"),
     "images-only": (recordings.images_only, QUICK, "no-point-cloud", "read", "/camera/image_raw"),
     "nan-clouds": (
         lambda: recordings.non_finite_clouds(float("nan")),

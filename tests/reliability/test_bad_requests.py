@@ -205,3 +205,67 @@ def test_unknown_robots_and_runs_are_404_problems(api: Api) -> None:
     for bad in ("/v1/runs/not-a-uuid", "/v1/runs/1", "/v1/runs/00000000-0000-4000-8000"):
         response = api.client.get(bad, headers=read)
         assert response.status_code == 422 and problem_type(response) == "invalid-request"
+
+
+# -- what an outside probe found (issue 15): each was a 500 ---------------------------------------
+
+LISTINGS_WITH_INSTANTS = ("/v1/runs", "/v1/robots/R1/history")
+
+
+def test_instants_utc_cannot_express_are_422_problems(api: Api) -> None:
+    """An offset at the end of the range: the conversion to UTC overflowed inside the query."""
+    api.upload("R1")
+    read = api.headers("read")
+    for path in LISTINGS_WITH_INSTANTS:
+        for name in ("since", "until"):
+            for instant in ("0001-01-01T00:00:00+23:59", "9999-12-31T23:59:59-23:59"):
+                response = api.client.get(path, params={name: instant}, headers=read)
+                assert response.status_code == 422, (path, name, instant, response.text)
+                assert problem_type(response) == "invalid-request"
+                assert "outside the instants UTC can express" in response.json()["detail"]
+        # The range's own ends, in UTC, are instants like any other.
+        widest = {"since": "0001-01-01T00:00:00Z", "until": "9999-12-31T23:59:59.999999Z"}
+        assert api.client.get(path, params=widest, headers=read).status_code == 200, path
+
+
+def test_control_characters_in_a_query_parameter_are_422_problems(api: Api) -> None:
+    """PostgreSQL refuses a NUL in text; no frame holds a control character."""
+    api.upload("R1")
+    for frame in ("a\x00b", "a\x1fb", "lidar\n", "\x7f"):
+        response = api.client.get(
+            "/v1/robots/R1/history", params={"frame": frame}, headers=api.headers("read")
+        )
+        assert response.status_code == 422, (frame, response.text)
+        assert problem_type(response) == "invalid-request"
+
+
+def test_cursors_holding_what_no_cursor_holds_are_400_problems(api: Api) -> None:
+    """Well-formed cursors, so that each reaches the key it carries: a NUL (PostgreSQL), a row id
+    that is no integer or is past 64 bits (SQLite), an instant outside UTC's range."""
+    from service.pagination import encode_cursor
+
+    api.upload("R1")
+    instant = "2026-01-01T00:00:00+00:00"
+    robots = [encode_cursor("robots", "R\x001"), encode_cursor("robots", "R1") + "\x00"]
+    cases = {
+        "/v1/robots": robots,
+        "/v1/fleet": robots,
+        "/v1/robots/R1/history": [
+            encode_cursor("history", instant, "1" * 31),
+            encode_cursor("history", instant, str(2**63)),
+            encode_cursor("history", instant, "²"),
+            encode_cursor("history", instant, "1\x00"),
+            encode_cursor("history", instant + "\x00", "1"),
+            encode_cursor("history", "0001-01-01T00:00:00+23:59", "1"),
+        ],
+        "/v1/runs": [
+            encode_cursor("runs", instant + "\x00", "0" * 32),
+            encode_cursor("runs", "9999-12-31T23:59:59-23:59", "0" * 32),
+            encode_cursor("runs", instant, "0" * 31 + "\x00"),
+        ],
+    }
+    for path, cursors in cases.items():
+        for cursor in cursors:
+            response = api.client.get(path, params={"cursor": cursor}, headers=api.headers("read"))
+            assert response.status_code == 400, (path, cursor, response.text)
+            assert problem_type(response) == "invalid-cursor"

@@ -47,9 +47,36 @@ def test_text_output(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "format      ros1 (ros1 storage)" in result.stdout
     assert "lidar_rear   /lidar_rear/points  51 scans, 0.6 k points/s" in result.stdout
-    assert "stops       2 (mean 1.9 s; times from the recording's start)" in result.stdout
-    assert "    1     3.08 -    5.00 s  (1.9 s)" in result.stdout
+    assert (
+        "clocks      trajectory header stamps 0.000 s behind the log time; LiDARs on the same "
+        "clock\n"
+        "stops       2 (mean 2.00 s; times from the recording's start; scans wholly inside "
+        "each, per LiDAR)\n"
+        "                 span            duration  lidar_front  lidar_rear\n"
+        "    0     0.00 -    2.00 s    2.00 s           19          19\n"
+        "    1     3.00 -    5.00 s    2.00 s           19          19\n"
+    ) in result.stdout
     assert "- too few stops: 2 found" in result.stdout
+
+
+def test_text_output_shows_a_lidar_on_another_clock_and_short_stops(tmp_path: Path) -> None:
+    behind = -120 * 86_400 * 10**9
+    offsets = {"/lidar_front/points": behind}
+    path = _recording(tmp_path, dwell_s=0.4, t0=1.7e9, header_clock_offset_ns=offsets)
+
+    result = run(str(path))
+
+    assert result.exit_code == 0, result.output
+    assert (
+        "clocks      trajectory header stamps 0.000 s behind the log time; 1 LiDAR(s) on "
+        "another clock\n"
+        "  lidar_front  header stamps 10368000.000 s behind the log time: shifted by "
+        "+10368000.000 s onto the trajectory's clock\n"
+    ) in result.stdout
+    assert "    1     1.40 -    1.80 s    0.40 s            3           3\n" in result.stdout
+    assert "- short stops: 2 of 2 stops last under 1 s" in result.stdout
+    assert "- sparse stops: LiDAR lidar_front" in result.stdout
+    assert "- clocks disagree: /lidar_front/points's header stamps" in result.stdout
 
 
 def test_config_file_supplies_extrinsics(tmp_path: Path) -> None:

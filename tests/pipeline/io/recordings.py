@@ -7,15 +7,17 @@ zero points, so a test can check that the reader keeps exactly the right scans a
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.io.typestores import POINTCLOUD2
 from pipeline.io.writer import RecordingWriter, WriterFormat
+from pipeline.synth.lidar_models import LidarModel
 from pipeline.transforms import Matrix4, apply, from_xyz_rpy, invert
 
 NS = 1_000_000_000
@@ -52,12 +54,25 @@ class Spec:
     big_endian_lidars: Sequence[str] = ("lidar_rear",)
     ring_lidars: Sequence[str] = ("lidar_rear",)
     """Their scans carry a uint16 `ring` field, as spinning LiDARs' drivers publish."""
+    beam_field: str = "ring"
+    """The name of that field (nebula drivers: `channel`, Luminar: `laser_id`)."""
+    models: Mapping[str, LidarModel] = field(default_factory=dict)
+    """LiDAR name -> synthesiser scan model: its scans fire the model's directions (at
+    `model_rate_scale`, ranges 1-10 m) instead of floor points; `ring` from the model."""
+    model_rate_scale: float = 0.1
+    organised_lidars: Sequence[str] = ()
+    """Their scans are organised clouds, `organised_rows` rows with padding at each row's end."""
+    organised_rows: int = 4
+    radar_topics: Sequence[str] = ()
+    """Extra PointCloud2 topics with a radar's fields (`rcs`, `v_r`, `snr`), one frame each."""
     nan_fraction_of: dict[str, float] = field(default_factory=dict)
     """Per-LiDAR override of `nan_fraction` (1.0: a dead LiDAR)."""
     footprint_height: float | None = None
     """If set, odometry moves `base_footprint`, this far below `base_link` (a tf_static edge)."""
     frame_prefix: str = ""
     """Written before every frame id (`/` as ROS 1 tf used to)."""
+    header_clock_offset_ns: int | Mapping[str, int] = 0
+    """Header stamps = log times + this, for every topic or by topic (see `RecordingWriter`)."""
     seed: int = 7
 
 
@@ -75,8 +90,20 @@ class Truth:
 
 def pose_at(spec: Spec, t: float, *, with_error: bool = False) -> Matrix4:
     """True (or odometry) `T_odom_base` at time `t`: stop k spans [k*(dwell+move), +dwell]."""
+    return _pose_since_start(spec, t - spec.t0, with_error=with_error)
+
+
+def _stamps_ns(spec: Spec, hz: float) -> NDArray[np.int64]:
+    """Stamps every 1/hz from the first stop's start to the last one's end (both included), in
+    integer nanoseconds: float seconds at a wall clock's epoch would round the last one away."""
+    duration_ns = round(((spec.stops - 1) * (spec.dwell_s + spec.move_s) + spec.dwell_s) * NS)
+    period_ns = round(NS / hz)
+    return round(spec.t0 * NS) + np.arange(duration_ns // period_ns + 1) * period_ns
+
+
+def _pose_since_start(spec: Spec, rel: float, *, with_error: bool = False) -> Matrix4:
     cycle = spec.dwell_s + spec.move_s
-    rel = max(t - spec.t0, 0.0)
+    rel = max(rel, 0.0)
     k = min(int(rel // cycle), spec.stops - 1)
     frac = (
         0.0 if rel - k * cycle <= spec.dwell_s else (rel - k * cycle - spec.dwell_s) / spec.move_s
@@ -94,7 +121,6 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
     """Write the recording of `spec` at `path` in `fmt`; return its truth."""
     rng = np.random.default_rng(spec.seed)
     cycle = spec.dwell_s + spec.move_s
-    t_end = spec.t0 + (spec.stops - 1) * cycle + spec.dwell_s
     initial = {name: TRUE_EXTRINSICS[name] @ PERTURBATION for name in spec.lidars}
     n_zero = int(spec.points * spec.zero_fraction)
     n_nan = {
@@ -105,7 +131,7 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
     n_valid = {name: spec.points - n_nan[name] - n_zero for name in spec.lidars}
     f = spec.frame_prefix
     T_footprint_base = from_xyz_rpy([0.0, 0.0, spec.footprint_height or 0.0], [0.0, 0.0, 0.0])
-    with RecordingWriter(path, fmt) as writer:
+    with RecordingWriter(path, fmt, header_clock_offset_ns=spec.header_clock_offset_ns) as writer:
         if spec.tf_static:
             edges = (
                 [(f + "base_link", f + "lidar_front", initial["lidar_front"])]
@@ -122,9 +148,8 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
             if spec.footprint_height is not None:
                 edges.append((f + "base_footprint", f + "base_link", T_footprint_base))
             writer.write_transforms(int(spec.t0 * NS), edges, static=True)
-        for t in np.arange(spec.t0, t_end + 1e-9, 1.0 / spec.odom_hz):
-            stamp = round(float(t) * NS)
-            T = pose_at(spec, t, with_error=True)
+        for stamp in _stamps_ns(spec, spec.odom_hz).tolist():
+            T = _pose_since_start(spec, (stamp - round(spec.t0 * NS)) / NS, with_error=True)
             child = "base_link"
             if spec.footprint_height is not None:
                 T, child = T @ invert(T_footprint_base), "base_footprint"
@@ -134,35 +159,53 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
                 )
             elif spec.trajectory == "tf":
                 writer.write_transforms(stamp, [(f + "odom", f + child, T)])
-        for t in np.arange(spec.t0, t_end + 1e-9, 1.0 / spec.scan_hz):
-            stamp = round(float(t) * NS)
-            T_odom_base = pose_at(spec, t)
+        for stamp in _stamps_ns(spec, spec.scan_hz).tolist():
+            t = spec.t0 + (stamp - round(spec.t0 * NS)) / NS
             for name in spec.lidars:
-                radius = rng.uniform(1.0, 4.0, n_valid[name])
-                angle = rng.uniform(0, 2 * np.pi, n_valid[name])
-                floor = np.c_[
-                    radius * np.cos(angle), radius * np.sin(angle), np.zeros(n_valid[name])
-                ]
-                floor[:, :2] += T_odom_base[:2, 3]
-                in_lidar = apply(invert(T_odom_base @ TRUE_EXTRINSICS[name]), floor)
-                junk = np.r_[np.full((n_nan[name], 3), np.nan), np.zeros((n_zero, 3))]
-                stacked: NDArray[np.float64] = np.r_[in_lidar, junk]
-                points = stacked[rng.permutation(len(stacked))]
+                if name in spec.models:
+                    points, beams = _model_scan(spec, spec.models[name], t, rng)
+                else:
+                    points, beams = _floor_scan(
+                        spec, name, t, (n_valid[name], n_nan[name], n_zero), rng
+                    )
+                fields: dict[str, NDArray[Any]] = {"intensity": rng.uniform(0, 100, len(points))}
+                if name in spec.ring_lidars:
+                    fields[spec.beam_field] = beams
+                dtype = np.float64 if name in spec.float64_lidars else np.float32
+                big_endian = name in spec.big_endian_lidars
+                if name in spec.organised_lidars:
+                    write_organised_cloud(
+                        writer,
+                        f"/{name}/points",
+                        stamp,
+                        f + name,
+                        points,
+                        fields,
+                        spec.organised_rows,
+                        dtype=dtype,
+                    )
+                else:
+                    writer.write_pointcloud(
+                        f"/{name}/points",
+                        stamp,
+                        f + name,
+                        points,
+                        extra_fields=fields,
+                        dtype=dtype,
+                        big_endian=big_endian,
+                    )
+            for k, topic in enumerate(spec.radar_topics):
+                detections = rng.uniform(-20, 20, (30, 3))
                 writer.write_pointcloud(
-                    f"/{name}/points",
+                    topic,
                     stamp,
-                    f + name,
-                    points,
+                    f"{f}radar_{k}",
+                    detections,
                     extra_fields={
-                        "intensity": rng.uniform(0, 100, len(points)),
-                        **(
-                            {"ring": np.arange(len(points), dtype=np.uint16) % 16}
-                            if name in spec.ring_lidars
-                            else {}
-                        ),
+                        "rcs": rng.uniform(-10, 30, 30).astype(np.float32),
+                        "v_r": rng.uniform(-5, 5, 30).astype(np.float32),
+                        "snr": rng.uniform(0, 40, 30).astype(np.float32),
                     },
-                    dtype=np.float64 if name in spec.float64_lidars else np.float32,
-                    big_endian=name in spec.big_endian_lidars,
                 )
     spans = [(spec.t0 + k * cycle, spec.t0 + k * cycle + spec.dwell_s) for k in range(spec.stops)]
     return Truth(
@@ -173,3 +216,81 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
         T_base_lidar_initial=initial,
         valid_per_scan=n_valid,
     )
+
+
+def _floor_scan(
+    spec: Spec, name: str, t: float, counts: tuple[int, int, int], rng: np.random.Generator
+) -> tuple[NDArray[np.float64], NDArray[np.uint16]]:
+    """Floor points seen with the TRUE pose and extrinsic at `t`, mixed with NaN and zero
+    points (`counts`: valid, NaN, zero), and a made-up beam index."""
+    valid, nan, zero = counts
+    T_odom_base = pose_at(spec, t)
+    radius = rng.uniform(1.0, 4.0, valid)
+    angle = rng.uniform(0, 2 * np.pi, valid)
+    floor = np.c_[radius * np.cos(angle), radius * np.sin(angle), np.zeros(valid)]
+    floor[:, :2] += T_odom_base[:2, 3]
+    in_lidar = apply(invert(T_odom_base @ TRUE_EXTRINSICS[name]), floor)
+    junk = np.r_[np.full((nan, 3), np.nan), np.zeros((zero, 3))]
+    stacked: NDArray[np.float64] = np.r_[in_lidar, junk]
+    points = stacked[rng.permutation(len(stacked))]
+    return points, (np.arange(len(points)) % 16).astype(np.uint16)
+
+
+def _model_scan(
+    spec: Spec, model: LidarModel, t: float, rng: np.random.Generator
+) -> tuple[NDArray[np.float64], NDArray[np.uint16]]:
+    """The directions `model` fires in the scan starting at `t`, at random ranges (1-10 m)."""
+    firing = model.firing(t - spec.t0, model.scan_period_s, spec.model_rate_scale)
+    points = firing.directions * rng.uniform(1.0, 10.0, (len(firing), 1))
+    beams = model.point_fields(points).get("ring")
+    if beams is None:
+        beams = np.zeros(len(points))
+    return points, np.asarray(beams, dtype=np.uint16)
+
+
+def write_organised_cloud(
+    writer: RecordingWriter,
+    topic: str,
+    stamp_ns: int,
+    frame_id: str,
+    points: NDArray[np.float64],
+    fields: Mapping[str, NDArray[Any]],
+    rows: int,
+    *,
+    dtype: type[np.floating[Any]] = np.float32,
+    row_padding: int = 8,
+) -> None:
+    """One organised PointCloud2 (`height = rows`, as Ouster drivers publish), each row padded
+    with `row_padding` bytes; `len(points)` must be a multiple of `rows`."""
+    columns = len(points) // rows
+    assert columns * rows == len(points), f"{len(points)} points do not fill {rows} rows"
+    names = {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
+    record = np.zeros(
+        len(points),
+        dtype=[(n, dtype) for n in names] + [(n, v.dtype) for n, v in fields.items()],
+    )
+    for name, values in {**names, **fields}.items():
+        record[name] = values
+    codes = {"u1": 2, "u2": 4, "i4": 5, "u4": 6, "f4": 7, "f8": 8}
+    point_field = writer.types["sensor_msgs/msg/PointField"]
+    offsets = record.dtype.fields or {}
+    rows_bytes = record.view(np.uint8).reshape(rows, columns * record.dtype.itemsize)
+    padded = np.concatenate([rows_bytes, np.zeros((rows, row_padding), np.uint8)], axis=1)
+    types = writer.types
+    stamp = types["builtin_interfaces/msg/Time"](sec=stamp_ns // NS, nanosec=stamp_ns % NS)
+    ros1 = {"seq": 0} if writer.format is WriterFormat.ROS1 else {}
+    msg = types[POINTCLOUD2](
+        header=types["std_msgs/msg/Header"](**ros1, stamp=stamp, frame_id=frame_id),
+        height=rows,
+        width=columns,
+        fields=[
+            point_field(name=name, offset=int(offset), datatype=codes[sub.str[1:]], count=1)
+            for name, (sub, offset) in offsets.items()
+        ],
+        is_bigendian=False,
+        point_step=record.dtype.itemsize,
+        row_step=columns * record.dtype.itemsize + row_padding,
+        data=padded.reshape(-1),
+        is_dense=False,
+    )
+    writer.write_raw(topic, POINTCLOUD2, stamp_ns, msg)

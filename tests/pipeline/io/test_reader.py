@@ -22,8 +22,8 @@ from pipeline.io.errors import (
     UnknownFormatError,
 )
 from pipeline.io.writer import RecordingWriter, WriterFormat
-from pipeline.problem import ScanPattern
-from pipeline.transforms import apply, pose_difference, to_translation_xyzw
+from pipeline.problem import CalibrationProblem, ScanPattern
+from pipeline.transforms import apply, from_xyz_rpy, pose_difference, to_translation_xyzw
 from tests.pipeline.io.conftest import SCENE
 from tests.pipeline.io.recordings import Spec, Truth, write_recording
 
@@ -250,14 +250,63 @@ def test_lidar_without_extrinsics(tmp_path: Path) -> None:
 
 
 def test_no_stops(tmp_path: Path) -> None:
-    with pytest.raises(NoStopsError, match=r"no stops found .*longest still span lasted 0\.\d+ s"):
-        read_recording(_write(tmp_path, Spec(stops=3, points=50, dwell_s=0.6)))
+    with pytest.raises(
+        NoStopsError,
+        match=r"no stops found .*for 0\.30 s \(min_dwell_s\); its longest still span "
+        r"lasted 0\.20 s",
+    ):
+        read_recording(_write(tmp_path, Spec(stops=3, points=50, dwell_s=0.2)))
 
 
-def test_looser_stop_settings_find_short_stops(tmp_path: Path) -> None:
-    path = _write(tmp_path, Spec(stops=3, points=50, dwell_s=0.6))
-    config = ReaderConfig(stops=StopDetectionConfig(min_dwell_s=0.3))
-    assert len(read_recording(path, config).stops) == 3
+def test_looser_stop_settings_find_shorter_stops(tmp_path: Path) -> None:
+    path = _write(tmp_path, Spec(stops=3, points=50, dwell_s=0.2, scan_hz=20.0))
+    config = ReaderConfig(stops=StopDetectionConfig(min_dwell_s=0.15))
+    problem = read_recording(path, config)
+    assert [stop.scan_counts["lidar_front"] for stop in problem.stops] == [3, 3, 3]
+
+
+@pytest.mark.parametrize(
+    ("dwell_s", "scans"),
+    [(0.3, 2), (0.4, 3), (0.8, 7), (1.0, 9)],
+)
+def test_short_stops_are_kept_by_default_with_their_scans(
+    tmp_path: Path, dwell_s: float, scans: int
+) -> None:
+    spec = Spec(stops=4, points=50, dwell_s=dwell_s, t0=1_700_000_000.0)
+    truth = write_recording(tmp_path / "r", WriterFormat.ROS2_MCAP, spec)
+
+    problem = read_recording(tmp_path / "r")
+
+    assert len(problem.stops) == 4
+    for stop, (start, end) in zip(problem.stops, truth.stop_spans, strict=True):
+        # The span is the true still span, to the trajectory's float-second stamps' rounding.
+        assert stop.t_start == pytest.approx(start, abs=1e-5)
+        assert stop.t_end == pytest.approx(end, abs=1e-5)
+        assert dict(stop.scan_counts) == {"lidar_front": scans, "lidar_rear": scans}
+
+
+def test_stops_lasting_exactly_the_configured_minimum_are_all_found(tmp_path: Path) -> None:
+    path = _write(tmp_path, Spec(stops=5, points=50, dwell_s=1.0, t0=1_700_000_000.0))
+    config = ReaderConfig(stops=StopDetectionConfig(min_dwell_s=1.0))
+    assert len(read_recording(path, config).stops) == 5
+
+
+def test_stops_shorter_than_three_scan_periods_are_no_stops(tmp_path: Path) -> None:
+    path = _write(tmp_path, Spec(stops=3, points=50, dwell_s=1.0, scan_hz=2.5))
+    with pytest.raises(
+        NoStopsError,
+        match=r"for 1\.20 s \(3 scan periods of /lidar_front/points \(0\.400 s each; "
+        r"min_dwell_s is 0\.3 s\)\); its longest still span lasted 1\.00 s",
+    ):
+        read_recording(path)
+    assert (
+        len(
+            read_recording(
+                _write(tmp_path / "b", Spec(stops=3, points=50, dwell_s=1.2, scan_hz=2.5))
+            ).stops
+        )
+        == 3
+    )
 
 
 def test_dead_lidar_has_no_valid_point_in_a_stop(tmp_path: Path) -> None:
@@ -269,10 +318,27 @@ def test_dead_lidar_has_no_valid_point_in_a_stop(tmp_path: Path) -> None:
         read_recording(_write(tmp_path, spec))
 
 
-def test_stop_shorter_than_a_scan_has_no_scan_inside(tmp_path: Path) -> None:
-    spec = Spec(stops=2, points=50, scan_hz=0.5)
-    with pytest.raises(EmptyStopCloudError, match=r"none of its scans lies wholly inside the stop"):
-        read_recording(_write(tmp_path, spec))
+def test_lidar_silent_during_a_stop_has_no_scan_inside(tmp_path: Path) -> None:
+    path = tmp_path / "silent"
+    points = np.ones((10, 3))
+    with RecordingWriter(path, WriterFormat.ROS2_MCAP) as writer:
+        writer.write_transforms(
+            0, [("base_link", "a", np.eye(4)), ("base_link", "b", np.eye(4))], static=True
+        )
+        for k in range(51):  # still 0-2 s, a 0.5 m drive, still 3-5 s; b is silent after 2.5 s
+            t = k * 10**8
+            writer.write_odometry(
+                "/odom", t, from_xyz_rpy([0.5 * min(max(t / 1e9 - 2, 0), 1), 0, 0], [0, 0, 0])
+            )
+            writer.write_pointcloud("/a/points", t, "a", points)
+            if t < 25 * 10**8:
+                writer.write_pointcloud("/b/points", t, "b", points)
+    with pytest.raises(
+        EmptyStopCloudError,
+        match=r"LiDAR b \(/b/points\) has no valid point in stop 1 .*none of its scans lies "
+        r"wholly inside the stop \(0 stamped in it",
+    ):
+        read_recording(path)
 
 
 def test_two_topics_in_one_frame_are_refused(tmp_path: Path) -> None:
@@ -334,3 +400,133 @@ def test_damaged_metadata_yaml(recordings: dict[str, Path], tmp_path: Path) -> N
         CorruptRecordingError, match=r"metadata.yaml cannot be read .*remove metadata"
     ):
         read_recording(bag)
+
+
+# -- clocks -----------------------------------------------------------------------------------
+
+NS = 1_000_000_000
+WALL_T0 = 1_700_000_000.0  # the wall clock `ros2 bag record` logs
+WALL_T0_NS = round(WALL_T0 * NS)
+MONTHS_NS = 120 * 86_400 * NS
+LIDAR_TOPICS = ("/lidar_front/points", "/lidar_rear/points")
+
+
+def _clock_twin(
+    tmp_path: Path,
+    name: str,
+    offset: int | dict[str, int] = 0,
+    fmt: WriterFormat = WriterFormat.ROS2_MCAP,
+    trajectory: str = "odometry",
+) -> Path:
+    """The same routine (stops of 0.8 s) on the same log times, headers `offset` from them."""
+    spec = Spec(
+        stops=3,
+        points=60,
+        dwell_s=0.8,
+        t0=WALL_T0,
+        trajectory=trajectory,  # type: ignore[arg-type]
+        header_clock_offset_ns=offset,
+    )
+    write_recording(tmp_path / name, fmt, spec)
+    return tmp_path / name
+
+
+def assert_same_problem(a: CalibrationProblem, b: CalibrationProblem) -> None:
+    """Bit for bit, but for the file's path and the warnings (checked by the caller)."""
+    assert (a.frames, a.base_frame, a.odom_frame) == (b.frames, b.base_frame, b.odom_frame)
+    for x, y in zip(a.lidars, b.lidars, strict=True):
+        assert (x.topic, x.scan_count, x.points_per_second, x.scan_pattern) == (
+            y.topic,
+            y.scan_count,
+            y.points_per_second,
+            y.scan_pattern,
+        )
+        assert x.T_base_lidar.tobytes() == y.T_base_lidar.tobytes()
+    assert len(a.stops) == len(b.stops) == 3
+    for x, y in zip(a.stops, b.stops, strict=True):
+        assert (x.index, x.t_start, x.t_end) == (y.index, y.t_start, y.t_end)
+        assert dict(x.scan_counts) == dict(y.scan_counts) == {"lidar_front": 7, "lidar_rear": 7}
+        assert x.T_odom_base.tobytes() == y.T_odom_base.tobytes()
+        assert x.clouds.keys() == y.clouds.keys()
+        for frame, cloud in x.clouds.items():
+            assert cloud.dtype == y.clouds[frame].dtype
+            assert cloud.tobytes() == y.clouds[frame].tobytes()
+    assert a.recording is not None and b.recording is not None
+    assert (a.recording.format, a.recording.t_start, a.recording.t_end) == (
+        b.recording.format,
+        b.recording.t_start,
+        b.recording.t_end,
+    )
+
+
+@pytest.mark.parametrize(
+    ("sim_start_s", "trajectory", "fmt"),
+    [
+        (0, "odometry", WriterFormat.ROS2_MCAP),  # stamps of exactly 0 are time, not unset
+        (1000, "tf", WriterFormat.ROS2_MCAP),
+        (1000, "odometry", WriterFormat.ROS1),
+    ],
+)
+def test_simulated_clock_reads_like_its_wall_clock_twin(
+    tmp_path: Path, sim_start_s: int, trajectory: str, fmt: WriterFormat
+) -> None:
+    """Gazebo / Isaac: every header on simulated time, the bag's log times on the wall clock."""
+    wall = _clock_twin(tmp_path, "wall", 0, fmt, trajectory)
+    sim = _clock_twin(tmp_path, "sim", sim_start_s * NS - WALL_T0_NS, fmt, trajectory)
+
+    problem = read_recording(sim)
+    twin = read_recording(wall)
+
+    assert_same_problem(problem, twin)
+    assert problem.recording is not None and twin.recording is not None
+    assert problem.recording.warnings == twin.recording.warnings
+    # Stops are reported on the log clock, where the recording's start and end are.
+    assert problem.stops[0].t_start == pytest.approx(WALL_T0, abs=1e-6)
+    summary = summarize_recording(sim, keep_points=False)
+    assert summary.trajectory_clock_offset_ns == WALL_T0_NS - sim_start_s * NS
+    assert [lidar.clock_shift_ns for lidar in summary.lidars] == [0, 0]
+
+
+@pytest.mark.parametrize(
+    "offsets",
+    [
+        {topic: -MONTHS_NS for topic in LIDAR_TOPICS},
+        {"/lidar_front/points": -MONTHS_NS, "/lidar_rear/points": 3 * NS},
+    ],
+    ids=["both-months-behind", "behind-and-ahead"],
+)
+def test_lidar_clock_off_the_trajectorys_is_realigned_like_its_twin(
+    tmp_path: Path, offsets: dict[str, int]
+) -> None:
+    """A real bag: the odometry on the log time, the LiDARs' drivers on clocks of their own."""
+    off = _clock_twin(tmp_path, "off", offsets)
+    wall = _clock_twin(tmp_path, "wall")
+
+    problem = read_recording(off)
+    twin = read_recording(wall)
+
+    assert_same_problem(problem, twin)
+    assert problem.recording is not None and twin.recording is not None
+    notes = [w for w in problem.recording.warnings if w not in twin.recording.warnings]
+    assert len(notes) == 2
+    assert notes[0].startswith(
+        "clocks disagree: /lidar_front/points's header stamps are 10368000.000 s behind their "
+        "log times, the trajectory's (odometry:/odom) 0.000 s behind their log times"
+    )
+    assert f"shifted by {-offsets['/lidar_rear/points'] / NS:+.3f} s onto" in notes[1]
+    summary = summarize_recording(off, keep_points=False)
+    assert [lidar.clock_shift_ns for lidar in summary.lidars] == [-offsets[t] for t in LIDAR_TOPICS]
+
+
+def test_lidar_latency_within_the_tolerance_keeps_its_header_stamps(tmp_path: Path) -> None:
+    path = _clock_twin(tmp_path, "late", {"/lidar_rear/points": -40_000_000})
+
+    summary = summarize_recording(path, keep_points=False)
+
+    rear = summary.lidars[1]
+    assert (rear.clock_offset_ns, rear.clock_shift_ns) == (40_000_000, 0)
+    assert not any("clocks disagree" in note for note in summary.notes)
+    tight = ReaderConfig(clock_tolerance_s=0.01)
+    assert (
+        summarize_recording(path, tight, keep_points=False).lidars[1].clock_shift_ns == 40_000_000
+    )

@@ -59,3 +59,42 @@ def test_stop_index_and_period() -> None:
     assert clouds.period_ns("lidar") == 0
     feed(clouds, 1.0, close=False)
     assert clouds.period_ns("lidar") == NS // 10
+
+
+def test_a_scan_after_its_stop_closed_is_late_and_leaves_the_cloud_alone() -> None:
+    clouds = StopClouds(STOPS)
+    feed(clouds, 5.5)
+    before = clouds.closed[0]["lidar"]
+
+    clouds.add_scan("lidar", 2 * NS, np.zeros((4, 3)))
+    clouds.close_all()
+
+    assert clouds.closed[0]["lidar"] is before and before.scans == 19
+    assert clouds.late == {"lidar": 1}
+
+
+def test_scans_exactly_one_period_from_the_edges_are_inside() -> None:
+    stop = StopSpan(1 * NS + 7, 1 * NS + 300_000_007, np.eye(4))  # 0.3 s, three periods
+    clouds = StopClouds((stop,))
+    for k in range(30):
+        stamp = 7 + k * NS // 10
+        points = np.ones((2, 3)) if clouds.stop_index(stamp) is not None else None
+        clouds.add_scan("lidar", stamp, points)
+    clouds.close_all()
+
+    assert clouds.closed[0]["lidar"].scans == 2 and clouds.closed[0]["lidar"].scans_touching == 4
+
+
+def test_stamps_a_rounding_error_off_their_grid_do_not_fall_off_the_edge() -> None:
+    """A driver stamping from float seconds lands ~100 ns off the grid at today's epoch."""
+    epoch = 1_700_000_000 * NS
+    stop = StopSpan(epoch + NS, epoch + NS + 400_000_000, np.eye(4))
+    off_grid = {11: -120, 13: +120}  # one period inside the edges, rounded outwards
+    clouds = StopClouds((stop,))
+    for k in range(40):
+        stamp = epoch + k * NS // 10 + off_grid.get(k, 0)
+        points = np.ones((2, 3)) if clouds.stop_index(stamp) is not None else None
+        clouds.add_scan("lidar", stamp, points)
+    clouds.close_all()
+
+    assert clouds.closed[0]["lidar"].scans == 3

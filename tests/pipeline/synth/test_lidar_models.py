@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.problem import ScanPattern
-from pipeline.synth.lidar_models import Mid70, SpinningLidar
+from pipeline.synth.lidar_models import Mid70, Mid360, SpinningLidar
 
 
 def _coverage(directions: np.ndarray, cell_deg: float = 0.5) -> float:
@@ -87,3 +87,53 @@ def test_spinning_lidar_publishes_each_points_beam_as_ring() -> None:
 def test_spinning_mask_must_be_ordered() -> None:
     with pytest.raises(ValueError, match="yaw the mount"):
         SpinningLidar(azimuth_mask_deg=(90.0, -90.0))
+
+
+@pytest.mark.parametrize("name", ["ring", "channel", "laser_id"])
+def test_spinning_lidar_names_its_beam_field_as_its_driver_does(name: str) -> None:
+    model = SpinningLidar(beams=32, elevation_deg=(-25.0, 15.0), beam_field=name)
+    firing = model.firing(0.0, 0.01)
+    fields = model.point_fields(firing.directions * 5.0)
+    assert list(fields) == [name]
+    np.testing.assert_array_equal(fields[name], np.tile(np.arange(32), len(firing) // 32))
+
+
+def test_spinning_lidar_without_a_beam_field_publishes_none() -> None:
+    model = SpinningLidar(beam_field=None)
+    assert model.point_fields(model.firing(0.0, 0.01).directions) == {}
+    assert model.scan_pattern is ScanPattern.REPETITIVE
+
+
+def _band_coverage(directions: np.ndarray, cell_deg: float = 1.0) -> float:
+    azimuth = np.degrees(np.arctan2(directions[:, 1], directions[:, 0]))
+    elevation = np.degrees(np.arcsin(np.clip(directions[:, 2], -1, 1)))
+    cells = {
+        (int(a), int(b))
+        for a, b in zip(np.floor(azimuth / cell_deg), np.floor(elevation / cell_deg), strict=True)
+    }
+    return len(cells) / (360.0 * 59.0 / cell_deg**2)
+
+
+def test_mid360_covers_its_band_all_round_and_keeps_filling_in() -> None:
+    model = Mid360()
+    firing = model.firing(0.0, 0.1)
+    assert len(firing) == 20_000
+    np.testing.assert_allclose(np.linalg.norm(firing.directions, axis=1), 1.0, atol=1e-12)
+    elevation = np.degrees(np.arcsin(firing.directions[:, 2]))
+    assert elevation.min() >= -7.0 - 1e-9 and elevation.max() <= 52.0 + 1e-9
+    azimuth = np.degrees(np.arctan2(firing.directions[:, 1], firing.directions[:, 0]))
+    assert np.histogram(azimuth, bins=36, range=(-180, 180))[0].min() > 0
+    coverage = [_band_coverage(model.firing(0.0, s).directions) for s in (0.1, 0.3, 1.0)]
+    assert coverage[0] < coverage[1] < coverage[2] and coverage[2] > 1.5 * coverage[0], coverage
+    assert model.scan_pattern is ScanPattern.NON_REPETITIVE
+
+
+def test_mid360_pattern_continues_across_scans_and_names_each_points_line() -> None:
+    model = Mid360()
+    whole = model.firing(0.0, 0.2, rate_scale=0.1)
+    parts = [model.firing(0.0, 0.1, rate_scale=0.1), model.firing(0.1, 0.1, rate_scale=0.1)]
+    np.testing.assert_array_equal(np.concatenate([p.directions for p in parts]), whole.directions)
+    line = model.point_fields(whole.directions * 3.0)["line"]
+    assert line.dtype == np.uint8
+    np.testing.assert_array_equal(line, np.arange(len(whole)) % 4)
+    assert Mid360(line_field=False).point_fields(whole.directions) == {}

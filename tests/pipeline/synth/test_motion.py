@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from pipeline.synth.motion import ArcMotion, interpolate_drift
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from pipeline.synth.motion import Arc, ArcMotion, RouteMotion, Straight, interpolate_drift
 from pipeline.synth.perturbation import PerturbationBounds, random_perturbation
 from pipeline.transforms import pose_difference
 
@@ -42,3 +46,35 @@ def test_odometry_drift_is_constant_in_a_stop_and_bounded_between() -> None:
     moving = interpolate_drift(motion, deltas, np.linspace(1.0, 2.0, 50))
     sizes = np.array([pose_difference(np.eye(4), d) for d in moving])
     assert sizes[:, 0].max() <= 0.2 + 1e-12 and sizes[:, 1].max() <= 3.0 + 1e-9
+
+
+def test_arc_motion_is_the_route_of_its_stops() -> None:
+    motion = ArcMotion(stops=5, radius_m=1.5, step_deg=-25.0, start_deg=10.0, dwell_s=0.7)
+    t = np.linspace(-0.2, motion.duration_s + 0.2, 777)
+    j, s, _ = motion.progress(t)
+    theta = np.radians(10.0 - 25.0 * (j + s))
+    poses = motion.poses(t)
+    np.testing.assert_allclose(poses[:, 0, 3], 1.5 * np.sin(theta), atol=1e-12)
+    np.testing.assert_allclose(poses[:, 1, 3], -1.5 * np.cos(theta), atol=1e-12)
+    np.testing.assert_allclose(motion.stop_intervals()[:, 0], np.arange(5) * 1.2, atol=1e-12)
+    assert motion.route.duration_s == pytest.approx(motion.duration_s)
+
+
+def test_route_needs_one_leg_between_each_pair_of_stops() -> None:
+    with pytest.raises(ValidationError, match=r"a route with 3 stops needs 2 legs"):
+        RouteMotion(dwell_s=(1.0, 1.0, 1.0), legs=((Straight(distance_m=1, duration_s=1),),))
+
+
+def test_wheel_travel_counts_distance_and_turning() -> None:
+    route = RouteMotion(
+        dwell_s=(1.0, 1.0, 1.0),
+        legs=(
+            (Straight(distance_m=-2.0, duration_s=3.0),),
+            (Arc(radius_m=1.0, angle_deg=90.0, duration_s=3.0),),
+        ),
+    )
+    np.testing.assert_allclose(route.travel_m(0.25), [0.0, 2.0, 2.0 + 1.25 * math.pi / 2])
+    # Reversing: the base drives backwards, still heading along +x.
+    end = route.poses(route.stop_intervals()[1:2, 0])[0]
+    np.testing.assert_allclose(end[:2, 3], [-2.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(end[:3, :3], np.eye(3), atol=1e-12)

@@ -10,9 +10,11 @@ import pytest
 
 from pipeline.errors import BadInputError
 from pipeline.io import read_recording, summarize_recording
+from pipeline.io.source import open_recording, stamp_ns
 from pipeline.problem import ScanPattern
 from pipeline.synth import load_truth, make_world
 from pipeline.synth.recording import write_recording
+from pipeline.synth.scenarios import get_scenario
 from pipeline.transforms import apply, pose_difference
 
 SEED = 11
@@ -134,3 +136,29 @@ def test_existing_output_directory_is_refused(tiny_dir: Path) -> None:
 def test_truth_without_a_recording_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(BadInputError, match="written by `fleetcal synth`"):
         load_truth(tmp_path)
+
+
+@pytest.mark.parametrize("ros1", [False, True])
+def test_header_clock_offsets_move_header_stamps_not_log_times(tmp_path: Path, ros1: bool) -> None:
+    offsets = {"/lidar_rear/points": -90 * 86_400 * 10**9, "/odom": 12_345_678}
+    spec = get_scenario("tiny").model_copy(update={"header_clock_offset_ns": offsets})
+    write_recording(spec, tmp_path / "offset", seed=SEED, ros1=ros1)
+    path = tmp_path / "offset" / ("recording.bag" if ros1 else "recording")
+    seen: dict[str, set[int]] = {}
+    with open_recording(path) as opened:
+        for connection, log_ns, raw in opened.messages(opened.connections):
+            if connection.topic == "/tf_static":
+                continue
+            header = opened.deserialize(raw, connection).header
+            seen.setdefault(connection.topic, set()).add(stamp_ns(header) - log_ns)
+    assert seen == {
+        "/lidar_front/points": {0},
+        "/lidar_rear/points": {offsets["/lidar_rear/points"]},
+        "/odom": {offsets["/odom"]},
+    }
+    assert (
+        json.loads((tmp_path / "offset" / "truth.json").read_text())["spec"][
+            "header_clock_offset_ns"
+        ]
+        == offsets
+    )

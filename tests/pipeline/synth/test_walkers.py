@@ -55,32 +55,33 @@ def test_no_walkway_clear_of_the_robot_is_refused_with_advice() -> None:
 
 
 def test_moving_points_are_labelled_on_the_walker_where_it_is_at_each_scan() -> None:
-    world = make_world(short("people", stops=2, dwell_s=1.5), seed=3, rate_scale=0.3)
-    scene = world.scene
-    assert len(scene.walkers) == 2
-    in_view: dict[tuple[int, int], list[bool]] = {}
-    moved = 0
-    for i in range(len(world.spec.lidars)):
-        T_world_lidar = world.T_world_lidar(i)
-        for j in range(world.spec.motion.stops):
-            for k in world.stop_scans(i, j):
-                labelled = world.simulate_scan(i, k)
-                moving = labelled.is_moving
-                in_view.setdefault((i, j), []).append(int(moving.sum()) > 5)
-                if moving.sum() <= 5:
-                    continue
-                assert np.all(labelled.object_index[moving] == NOT_STATIC)
-                pose = T_world_lidar(np.array([labelled.times[0]]))[0]
-                points = labelled.points[moving] @ pose[:3, :3].T + pose[:3, 3]
-                middle = (labelled.stamp_ns - world.spec.start_time_ns) / _NS + 0.05
-                now = _distance_to_walkers(world, points, middle)
-                assert np.quantile(now, 0.95) < 0.06
-                # Half a second earlier the walkers stood elsewhere: the points were not there.
-                before = _distance_to_walkers(world, points, middle - 0.5)
-                moved += int(np.median(before) > 0.2)
-    assert moved >= 3
-    # Each stop sees walkers in some scans and not in others for at least one LiDAR.
-    assert any(any(seen) and not all(seen) for seen in in_view.values()), in_view
+    partial = moved = 0
+    for seed in range(3):
+        world = make_world(short("people", stops=3, dwell_s=1.5), seed=seed, rate_scale=0.2)
+        assert len(world.scene.walkers) == 2
+        for i in range(len(world.spec.lidars)):
+            T_world_lidar = world.T_world_lidar(i)
+            for j in range(world.spec.motion.stops):
+                seen = []
+                for k in world.stop_scans(i, j):
+                    labelled = world.simulate_scan(i, k)
+                    moving = labelled.is_moving
+                    seen.append(int(moving.sum()) > 3)
+                    if not seen[-1]:
+                        continue
+                    assert np.all(labelled.object_index[moving] == NOT_STATIC)
+                    pose = T_world_lidar(np.array([labelled.times[0]]))[0]
+                    solid = moving & ~labelled.is_bleeding  # mixed returns float off the walker
+                    points = labelled.points[solid] @ pose[:3, :3].T + pose[:3, 3]
+                    middle = k * world.scan_period_ns(i) / _NS + 0.05
+                    assert np.quantile(_distance_to_walkers(world, points, middle), 0.95) < 0.06
+                    # Half a second earlier the walkers stood elsewhere: the points were not there.
+                    before = _distance_to_walkers(world, points, middle - 0.5)
+                    moved += int(np.median(before) > 0.2)
+                # Seen in some scans of the stop and not in others.
+                partial += int(any(seen) and not all(seen))
+    assert moved >= 10
+    assert partial >= 2
 
 
 def _distance_to_walkers(world, points: np.ndarray, t: float) -> np.ndarray:  # type: ignore[no-untyped-def]

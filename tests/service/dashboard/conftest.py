@@ -7,6 +7,7 @@ the repository root.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -21,6 +22,7 @@ import httpx
 import pytest
 import uvicorn
 
+from service import repository
 from service.app import create_app
 from service.auth import create_key
 from service.db import Database
@@ -62,9 +64,13 @@ def artifacts_dir() -> Path:
 
 
 @dataclass(frozen=True)
-class LiveApp:
+class ServedApp:
     url: str
     read_key: str
+
+
+@dataclass(frozen=True)
+class LiveApp(ServedApp):
     fleet: Fleet
 
 
@@ -83,15 +89,20 @@ def live_app(
     seed_images: dict[str, bytes],
 ) -> Iterator[LiveApp]:
     """The app (SQLite, local storage) served by uvicorn from a thread, with the fleet seeded."""
-    data = tmp_path_factory.mktemp("live")
-    settings = Settings(data_dir=data)
+    settings = Settings(data_dir=tmp_path_factory.mktemp("live"))
     db = Database.from_settings(settings)
     db.upgrade()
     fleet = seed_fleet(db, make_storage(settings), seed_recording, seed_images)
     with db.transaction() as session:
         read_key = create_key(session, [Scope.READ], name="dashboard test").secret
     db.dispose()
+    with serving(settings) as url:
+        yield LiveApp(url=url, read_key=read_key, fleet=fleet)
 
+
+@contextlib.contextmanager
+def serving(settings: Settings) -> Iterator[str]:
+    """The app for `settings` served by uvicorn from a thread; yields its base URL."""
     sock = _free_socket()
     server = uvicorn.Server(
         uvicorn.Config(create_app(settings), log_level="warning", lifespan="on")
@@ -104,10 +115,12 @@ def live_app(
         time.sleep(0.05)
     url = f"http://127.0.0.1:{sock.getsockname()[1]}"
     assert httpx.get(f"{url}/healthz").status_code == 200
-    yield LiveApp(url=url, read_key=read_key, fleet=fleet)
-    server.should_exit = True
-    thread.join(timeout=30)
-    sock.close()
+    try:
+        yield url
+    finally:
+        server.should_exit = True
+        thread.join(timeout=30)
+        sock.close()
 
 
 # -- the browser ----------------------------------------------------------------------------------
@@ -148,9 +161,30 @@ def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
         f"--user-data-dir={tmp_path_factory.mktemp('chromium-profile')}",
     ):
         options.add_argument(argument)
+    # The console log: a resource the page asks for and does not get (favicon) shows there.
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(service=Service(executable_path=driver_path), options=options)
     driver.set_page_load_timeout(60)
     try:
         yield driver
     finally:
         driver.quit()
+
+
+BIG_FLEET = 250
+"""Robots of `big_fleet_app`: more than the overview's first page (200)."""
+
+
+@pytest.fixture(scope="session")
+def big_fleet_app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServedApp]:
+    """The app with `BIG_FLEET` robots that never uploaded, and no runs."""
+    settings = Settings(data_dir=tmp_path_factory.mktemp("big-fleet"))
+    db = Database.from_settings(settings)
+    db.upgrade()
+    with db.transaction() as session:
+        for index in range(BIG_FLEET):
+            repository.put_robot(session, f"B{index:04d}", model="demo-bot", metadata={})
+        read_key = create_key(session, [Scope.READ], name="dashboard test").secret
+    db.dispose()
+    with serving(settings) as url:
+        yield ServedApp(url=url, read_key=read_key)

@@ -5,7 +5,11 @@ each state.
 
 R1 (model demo-bot): end-of-line passed 20 days ago, maintenance 10 days ago failed on drift (a
 hit mount), maintenance yesterday passed again. R2: a run that failed (no stops). R3: a run in
-progress.
+progress. R4 (demo-bot): two accepted calibrations 3 and 2 days ago, then a maintenance run 2 h
+ago whose optimisation diverged (the rear LiDAR 250 mm and 4 deg off, metric error and
+convergence failed): the newest run, and no calibration. R5: an end-of-line run on a floor with
+no objects in the rear LiDAR's view, every check of the pipeline's verdict, the rear LiDAR's x
+and yaw undetermined.
 """
 
 from __future__ import annotations
@@ -35,6 +39,10 @@ PROFILE_LIMITS = {
     "max_rotation_drift_deg": 0.5,
 }
 INITIAL = {frame: T @ PERTURBATION for frame, T in TRUE_EXTRINSICS.items()}
+DIVERGED = {
+    "lidar_front": TRUE_EXTRINSICS["lidar_front"],
+    "lidar_rear": TRUE_EXTRINSICS["lidar_rear"] @ from_xyz_rpy([0.25, 0, 0], [0, 0, 0.07]),
+}
 HIT = {  # the rear mount knocked 15 mm and 0.8 deg
     "lidar_front": TRUE_EXTRINSICS["lidar_front"],
     "lidar_rear": TRUE_EXTRINSICS["lidar_rear"] @ from_xyz_rpy([0.015, 0, 0], [0, 0, 0.014]),
@@ -65,6 +73,9 @@ class Fleet:
     repaired: uuid.UUID
     failed: uuid.UUID
     running: uuid.UUID
+    r4_accepted: tuple[uuid.UUID, uuid.UUID]
+    diverged: uuid.UUID
+    undetermined: uuid.UUID
     documents: dict[uuid.UUID, dict[str, Any]]
 
 
@@ -132,12 +143,50 @@ def result_document(
     return document
 
 
-def metric_check(value: float) -> dict[str, Any]:
+def pipeline_checks(
+    metric: float, *, iterations: int, converged: bool, rear_points: int, undetermined: list[str]
+) -> list[dict[str, Any]]:
+    """Every check `pipeline.verdict.judge` makes for the two LiDARs, with its default limits."""
+
+    def check(name: str, value: float, limit: float, passed: bool, detail: str) -> dict[str, Any]:
+        return {"name": name, "value": value, "limit": limit, "passed": passed, "detail": detail}
+
+    stddev_t = 4.9 if undetermined else 0.0011
+    stddev_r = 61.0 if undetermined else 0.02
+    return [
+        metric_check(metric, limit=0.04),
+        check(
+            "convergence",
+            float(iterations),
+            200.0,
+            converged,
+            "" if converged else "no convergence within 200 iterations",
+        ),
+        check("object_points:lidar_front", 18100.0, 200.0, True, ""),
+        check("object_points:lidar_rear", float(rear_points), 200.0, rear_points >= 200, ""),
+        {
+            **check(
+                "determined:lidar_rear",
+                float(len(undetermined)),
+                0.0,
+                not undetermined,
+                f"the data do not determine {', '.join(undetermined)} of lidar_rear"
+                if undetermined
+                else "",
+            ),
+            **({"dofs": undetermined} if undetermined else {}),
+        },
+        check("uncertainty_translation:lidar_rear", stddev_t, 0.005, stddev_t <= 0.005, ""),
+        check("uncertainty_rotation:lidar_rear", stddev_r, 0.1, stddev_r <= 0.1, ""),
+    ]
+
+
+def metric_check(value: float, limit: float = 0.01) -> dict[str, Any]:
     return {
         "name": "metric_error",
         "value": value,
-        "limit": 0.01,
-        "passed": value <= 0.01,
+        "limit": limit,
+        "passed": value <= limit,
         "detail": "",
     }
 
@@ -180,6 +229,7 @@ def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[st
             design_extrinsics=None,
         )
         repository.put_robot(session, "R1", model="demo-bot", metadata={"site": "line 2"})
+        repository.put_robot(session, "R4", model="demo-bot", metadata={"site": "line 3"})
 
     documents: dict[uuid.UUID, dict[str, Any]] = {}
     eol = _upload(db, storage, recording, "R1", RunKind.END_OF_LINE, now - timedelta(days=20))
@@ -227,7 +277,70 @@ def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[st
         assert run is not None
         run.status, run.attempts, run.started_at = RunStatus.RUNNING, 1, now
         run.stage, run.progress = "optimisation", 0.45
-    return Fleet(eol, hit, repaired, failed, running, documents)
+    r4 = _seed_r4(db, storage, recording, images, now, documents)
+    undetermined = _upload(
+        db, storage, recording, "R5", RunKind.END_OF_LINE, now - timedelta(hours=5)
+    )
+    documents[undetermined] = undetermined_document()
+    with db.transaction() as session:
+        repository.store_result(session, undetermined, documents[undetermined])
+    return Fleet(eol, hit, repaired, failed, running, r4[:2], r4[2], undetermined, documents)
+
+
+def _seed_r4(
+    db: Database,
+    storage: Storage,
+    recording: bytes,
+    images: dict[str, bytes],
+    now: datetime,
+    documents: dict[uuid.UUID, dict[str, Any]],
+) -> tuple[uuid.UUID, uuid.UUID, uuid.UUID]:
+    """Two accepted calibrations (3 and 2 days ago), then a diverged one 2 h ago."""
+    ids = []
+    for days_ago, calibrated, metric, kind in (
+        (3.0, TRUE_EXTRINSICS, 0.0015, RunKind.END_OF_LINE),
+        (2.0, REPAIRED, 0.0014, RunKind.MAINTENANCE),
+        (2 / 24, DIVERGED, 0.052, RunKind.MAINTENANCE),
+    ):
+        run_id = _upload(db, storage, recording, "R4", kind, now - timedelta(days=days_ago))
+        diverged = calibrated is DIVERGED
+        documents[run_id] = result_document(
+            calibrated,
+            metric=(0.031, metric),
+            checks=pipeline_checks(
+                metric,
+                iterations=200 if diverged else 22,
+                converged=not diverged,
+                rear_points=9350,
+                undetermined=[],
+            ),
+        )
+        store_report_images(storage, run_id, images)
+        with db.transaction() as session:
+            repository.store_result(session, run_id, documents[run_id])
+        ids.append(run_id)
+    return ids[0], ids[1], ids[2]
+
+
+def undetermined_document() -> dict[str, Any]:
+    """The rear LiDAR saw only the floor: x and yaw undetermined, no calibrated pose."""
+    undetermined = ["x", "yaw"]
+    document = result_document(
+        TRUE_EXTRINSICS,
+        metric=(0.0, 0.0),
+        checks=pipeline_checks(
+            0.0, iterations=12, converged=True, rear_points=40, undetermined=undetermined
+        ),
+    )
+    document["metric_error"] = {"initial": None, "final": None}
+    document["verdict"]["checks"][0].update(value=None, passed=False)
+    document["verdict"]["passed"] = False
+    rear = document["lidars"]["lidar_rear"]
+    rear["calibrated"] = None
+    rear["undetermined"] = undetermined
+    rear["stddev"] = {"translation_m": [None, 0.0007, 0.0011], "rotation_deg": [0.02, 0.02, None]}
+    document["report"] = {"images": []}
+    return document
 
 
 def _took(session: Any, run_id: uuid.UUID, seconds: float) -> None:

@@ -23,7 +23,7 @@ from tests.service.uploads import new_upload
 
 def test_upload_stores_the_recording_and_queues_a_run(api: Api) -> None:
     body = recording(100_000)
-    config = {"reference_frame": "lidar_front"}
+    config = {"frames": {"reference_frame": "lidar_front"}}
     response = api.upload(
         "R1",
         body,
@@ -86,6 +86,15 @@ def _assert_nothing_stored(api: Api) -> None:
     assert api.stored_files() == []
 
 
+# Configs an outside probe sent (issue 15): the first three were 500s (RecursionError; NaN and
+# Infinity, which PostgreSQL refuses in JSON), the last two queued runs that failed in the worker.
+DEEP_CONFIG = '{"frames": ' + "[" * 5000 + "]" * 5000 + "}"
+NAN_CONFIG = '{"frames": {"base_height_above_floor_m": NaN}}'
+INF_CONFIG = '{"frames": {"base_height_above_floor_m": Infinity}}'
+INVALID_CONFIG = '{"optimisation": {"max_iterations": 0}}'
+VERDICT_CONFIG = '{"verdict": {"max_metric_error_m": 100}}'
+
+
 @pytest.mark.parametrize(
     ("body", "headers", "query", "status", "slug"),
     [
@@ -94,8 +103,13 @@ def _assert_nothing_stored(api: Api) -> None:
         (b"", {}, "kind=end_of_line", 400, "empty-upload"),
         (None, {"X-Content-SHA256": "0" * 64}, "kind=end_of_line", 422, "checksum-mismatch"),
         (None, {"X-Content-SHA256": "not-a-hash"}, "kind=end_of_line", 422, "invalid-request"),
-        (None, {"X-Fleetcal-Config": "{not json"}, "kind=end_of_line", 400, "invalid-config"),
-        (None, {"X-Fleetcal-Config": "[1, 2]"}, "kind=end_of_line", 400, "invalid-config"),
+        (None, {"X-Fleetcal-Config": "{not json"}, "kind=end_of_line", 422, "invalid-config"),
+        (None, {"X-Fleetcal-Config": "[1, 2]"}, "kind=end_of_line", 422, "invalid-config"),
+        (None, {"X-Fleetcal-Config": DEEP_CONFIG}, "kind=end_of_line", 422, "invalid-config"),
+        (None, {"X-Fleetcal-Config": NAN_CONFIG}, "kind=end_of_line", 422, "invalid-config"),
+        (None, {"X-Fleetcal-Config": INF_CONFIG}, "kind=end_of_line", 422, "invalid-config"),
+        (None, {"X-Fleetcal-Config": INVALID_CONFIG}, "kind=end_of_line", 422, "invalid-config"),
+        (None, {"X-Fleetcal-Config": VERDICT_CONFIG}, "kind=end_of_line", 422, "invalid-config"),
         (None, {"X-Fleetcal-Config": "x" * 20_000}, "kind=end_of_line", 422, "invalid-request"),
         (None, {"Idempotency-Key": "a b"}, "kind=end_of_line", 422, "invalid-request"),
         (None, {}, "kind=daily", 422, "invalid-request"),
@@ -109,6 +123,11 @@ def _assert_nothing_stored(api: Api) -> None:
         "sha-malformed",
         "config-not-json",
         "config-not-object",
+        "config-nested-5000-deep",
+        "config-nan",
+        "config-infinity",
+        "config-not-a-pipeline-config",
+        "config-sets-its-verdict",
         "config-huge",
         "idempotency-key-space",
         "unknown-kind",

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from service import repository
 from tests.service.conftest import Api, problem_type
 
+POSE = {"translation": [0.45, 0.0, 0.62], "rotation_xyzw": [0, 0, 0, 1]}
 STRICT = {
     "robot_model": "mk2",
     "limits": {
@@ -68,6 +70,15 @@ def test_one_default_and_one_profile_per_model(api: Api) -> None:
         },
         {"robot_model": "has space"},
         {"is_default": "perhaps"},
+        # Booleans must be JSON booleans: 0 and "true" passed as bools.
+        {"is_default": 0},
+        {"is_default": 1},
+        {"is_default": "true"},
+        # A pose the worker cannot use failed every end-of-line run of the model in `drift`.
+        {"design_extrinsics": {"lidar_front": {**POSE, "rotation_xyzw": [0, 0, 0, 0]}}},
+        {"design_extrinsics": {"lidar_front": {**POSE, "rotation_xyzw": [1e-12, 0, 0, 0]}}},
+        {"design_extrinsics": {"lidar_front": {**POSE, "rotation_xyzw": [1e308, 1e308, 0, 0]}}},
+        {"design_extrinsics": {"lidar\x00front": POSE}},
         # Numbers must be JSON numbers (the API fuzzer's find: `true` was stored as 1 m).
         {"limits": {"max_translation_drift_m": True}},
         {"limits": {"max_rotation_drift_deg": "0.5"}},
@@ -100,3 +111,22 @@ def test_unknown_profile_and_bad_name(api: Api) -> None:
     assert response.status_code == 404 and problem_type(response) == "tolerance-profile-not-found"
     response = api.client.put("/v1/tolerance-profiles/-x", json={}, headers=api.headers("admin"))
     assert response.status_code == 422 and problem_type(response) == "invalid-request"
+
+
+def test_a_quaternion_off_unit_length_is_accepted_as_the_worker_normalises_it(api: Api) -> None:
+    body = {"design_extrinsics": {"lidar_front": {**POSE, "rotation_xyzw": [0, 0, 0, 2]}}}
+    response = api.client.put("/v1/tolerance-profiles/p", json=body, headers=api.headers("admin"))
+    assert response.status_code == 201, response.text
+    assert response.json()["design_extrinsics"]["lidar_front"]["rotation_xyzw"] == [0, 0, 0, 2]
+
+
+def test_a_profile_stored_before_poses_were_checked_still_shows(api: Api) -> None:
+    """So that an admin can see it and replace it."""
+    broken = {"lidar_front": {**POSE, "rotation_xyzw": [0.0, 0.0, 0.0, 0.0]}}
+    with api.services.db.transaction() as session:
+        repository.put_tolerance_profile(
+            session, "old", robot_model=None, is_default=False, limits={}, design_extrinsics=broken
+        )
+    response = api.client.get("/v1/tolerance-profiles/old", headers=api.headers("read"))
+    assert response.status_code == 200, response.text
+    assert response.json()["design_extrinsics"] == broken

@@ -1,0 +1,62 @@
+"""An upload's calibration config (`X-Fleetcal-Config`), checked when it arrives: JSON that both
+databases store, and a valid `PipelineConfig`. A bad config is a 422 problem at upload, not a
+run that fails later in the worker."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+from pipeline.config import config_from_mapping
+from pipeline.errors import ConfigError
+from service.problems import InvalidConfig
+
+HEADER = "X-Fleetcal-Config"
+
+
+class _NonFiniteNumberError(ValueError):
+    pass
+
+
+def _refuse_constant(name: str) -> float:
+    raise _NonFiniteNumberError(f"{name} is not a JSON number")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise _NonFiniteNumberError(f"{text} is beyond the range of a float64")
+    return value
+
+
+def parse_run_config(raw: str | None) -> dict[str, Any] | None:
+    """The config as plain data (stored with the run as sent), or `InvalidConfig`."""
+    if raw is None:
+        return None
+    try:
+        # NaN and Infinity parse in Python, but PostgreSQL refuses them in JSON.
+        value = json.loads(raw, parse_constant=_refuse_constant, parse_float=_finite_float)
+    except _NonFiniteNumberError as err:
+        raise InvalidConfig(f"{HEADER} holds a number JSON cannot carry: {err}") from err
+    except RecursionError as err:
+        raise InvalidConfig(
+            f"{HEADER} is nested too deeply; a pipeline config is sections of parameters, "
+            'e.g. {"frames": {"reference_frame": "lidar_front"}}'
+        ) from err
+    except ValueError as err:
+        raise InvalidConfig(f"{HEADER} is not valid JSON: {err}") from err
+    if not isinstance(value, dict):
+        raise InvalidConfig(f"{HEADER} must be a JSON object of config sections")
+    if "verdict" in value:
+        # The worker refuses it too (`workers.job.pipeline_config_for`): a robot must not
+        # loosen its own tolerances.
+        raise InvalidConfig(
+            f"{HEADER} sets 'verdict'; a run's tolerances come from the robot's tolerance "
+            "profile (PUT /v1/tolerance-profiles/{name}), remove 'verdict'"
+        )
+    try:
+        config_from_mapping(value)
+    except ConfigError as err:
+        raise InvalidConfig(f"{HEADER}: {err}") from err
+    return value

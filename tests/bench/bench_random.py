@@ -1,0 +1,331 @@
+"""The randomised benchmark (issue 13): calibrate the recordings `fleetcal synth random` draws.
+
+    .venv/bin/python -m tests.bench.bench_random [--seeds 1000-1099] [--jobs 2]
+        [--rate-scale 1.0] [--cache /tmp/fleetcal-bench-random] [--methods proposed ...]
+
+For each seed the recording is synthesised once into `CACHE/recordings/rate-F/seed-N` (a
+recording left half-written is written again), then read from disk with `pipeline.io` and
+calibrated by each method, as a user's upload would be. Each (method, seed) result is kept in
+`CACHE/results/rate-F/METHOD/seed-N.json`, so an interrupted run resumes where it stopped.
+Seeds run in `--jobs` processes, each with one BLAS thread.
+
+The error of a recording is, over its non-reference LiDARs, the largest error of the calibrated
+`T_ref_lidar` against the truth (as `bench_calibration` measures it). Success: within 5 mm and
+0.1 deg. The verdict's confusion: passed and within 10 mm / 0.3 deg; passed and worse (a
+**false pass**); failed and within 5 mm / 0.1 deg (a false fail); failed and worse. A recording
+the reader or the pipeline refuses counts as failed and as no success, in its own column.
+RMS of error / sigma: per LiDAR, the error over the norm of its reported 1-sigma (1 for an
+honest sigma). Seconds: read and calibrate, per recording.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import shutil  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from collections import defaultdict  # noqa: E402
+from collections.abc import Callable, Iterable, Sequence  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
+from dataclasses import asdict, dataclass, field  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from tests.bench.bench_calibration import (  # noqa: E402
+    CONFIG_METHODS,
+    Trial,
+    calibration_errors,
+    method_config,
+    paired_table,
+)
+
+SUCCESS = (0.005, 0.1)
+"""Within this translation (m) and rotation (deg) error a calibration succeeded."""
+PASS_OK = (0.010, 0.3)
+"""A passed verdict is right within this error, a false pass beyond it."""
+PAIRS = (("with_stage1", "without_stage1"), ("proposed", "point_to_point"))
+
+
+@dataclass
+class SeedResult:
+    """One method on one seed. Errors and sigmas per non-reference LiDAR (m, deg)."""
+
+    seed: int
+    method: str
+    scenario_class: str
+    clock: str
+    translation: list[float] = field(default_factory=list)
+    rotation: list[float] = field(default_factory=list)
+    sigma_translation: list[float] = field(default_factory=list)
+    sigma_rotation: list[float] = field(default_factory=list)
+    passed: bool = False
+    refused: str | None = None
+    seconds: float = 0.0
+
+    @property
+    def max_translation(self) -> float:
+        return max(self.translation) if self.translation else float("inf")
+
+    @property
+    def max_rotation(self) -> float:
+        return max(self.rotation) if self.rotation else float("inf")
+
+    def within(self, limits: tuple[float, float]) -> bool:
+        return self.refused is None and (
+            self.max_translation <= limits[0] and self.max_rotation <= limits[1]
+        )
+
+
+def parse_seeds(text: str) -> list[int]:
+    """`1000-1099`, `7` or `1,5,9-11` -> the seeds."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        low, _, high = part.strip().partition("-")
+        try:
+            first, last = int(low), int(high or low)
+        except ValueError:
+            raise SystemExit(f"--seeds {text!r}: write seeds as 1000-1099, 7 or 1,5,9-11") from None
+        if last < first:
+            raise SystemExit(f"--seeds {text!r}: a range runs from low to high, e.g. 1000-1099")
+        seeds += range(first, last + 1)
+    return seeds
+
+
+# -- one seed (in a worker process) -----------------------------------------------------------
+
+
+def recording_dir(cache: Path, rate_scale: float, seed: int) -> Path:
+    return cache / "recordings" / f"rate-{rate_scale:g}" / f"seed-{seed}"
+
+
+def result_path(cache: Path, rate_scale: float, method: str, seed: int) -> Path:
+    return cache / "results" / f"rate-{rate_scale:g}" / method / f"seed-{seed}.json"
+
+
+def ensure_recording(cache: Path, rate_scale: float, seed: int) -> tuple[Path, float]:
+    """The seed's recording directory, synthesised unless a complete one is cached; and the
+    seconds synthesis took (0 when cached)."""
+    from pipeline.synth.random_scenario import random_scenario
+    from pipeline.synth.recording import write_recording
+    from pipeline.synth.truth import TRUTH_FILE
+
+    out = recording_dir(cache, rate_scale, seed)
+    if (out / TRUTH_FILE).is_file():  # written last: its presence means the bag is complete
+        return out, 0.0
+    if out.exists():
+        shutil.rmtree(out)
+    started = time.perf_counter()
+    write_recording(random_scenario(seed), out, seed=seed, rate_scale=rate_scale)
+    return out, time.perf_counter() - started
+
+
+def run_seed(cache: Path, rate_scale: float, seed: int, methods: Sequence[str]) -> list[SeedResult]:
+    """Synthesise (once) and calibrate one seed with each method not already cached."""
+    from pipeline.calibrate import calibrate
+    from pipeline.errors import PipelineError
+    from pipeline.io import read_recording
+    from pipeline.synth.random_scenario import clock_kind, random_scenario
+    from pipeline.synth.truth import load_truth
+
+    spec = random_scenario(seed)
+    results = []
+    todo = [m for m in methods if not result_path(cache, rate_scale, m, seed).is_file()]
+    directory = recording_dir(cache, rate_scale, seed)
+    if todo:
+        directory, _ = ensure_recording(cache, rate_scale, seed)
+    for method in methods:
+        path = result_path(cache, rate_scale, method, seed)
+        if method not in todo:
+            results.append(SeedResult(**json.loads(path.read_text())))
+            continue
+        record = SeedResult(seed, method, spec.scenario_class, clock_kind(spec))
+        started = time.perf_counter()
+        try:
+            config = method_config(method)
+            problem = read_recording(directory / "recording", config.reader)
+            result = calibrate(problem, config)
+        except PipelineError as err:
+            record.refused = f"{type(err).__name__}: {err}"
+        else:
+            t, r, sigma_t, sigma_r = calibration_errors(result, load_truth(directory))
+            record.translation, record.rotation = t, r
+            record.sigma_translation, record.sigma_rotation = sigma_t, sigma_r
+            record.passed = bool(result.passed)
+        record.seconds = time.perf_counter() - started
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_suffix(".partial")
+        partial.write_text(json.dumps(asdict(record)))
+        partial.replace(path)  # atomic: a killed run leaves no half-written result
+        results.append(record)
+    return results
+
+
+def describe(record: SeedResult) -> str:
+    if record.refused:
+        return f"refused ({record.refused[:120]})"
+    verdict = "passed" if record.passed else "failed"
+    return (
+        f"{1000 * record.max_translation:.1f} mm / {record.max_rotation:.3f} deg, {verdict} "
+        f"({record.seconds:.0f} s)"
+    )
+
+
+# -- tables ----------------------------------------------------------------------------------
+
+
+def _percentile(values: Sequence[float], q: float) -> float:
+    return float(np.percentile(values, q)) if len(values) else float("nan")
+
+
+def summary_row(label: str, records: Sequence[SeedResult]) -> str:
+    """One row of the accuracy table for `records` (one method)."""
+    n = len(records)
+    calibrated = [r for r in records if r.refused is None]
+    t = [1000 * v for r in calibrated for v in r.translation]
+    rot = [v for r in calibrated for v in r.rotation]
+    success = sum(r.within(SUCCESS) for r in records)
+    passed_ok = sum(r.passed and r.within(PASS_OK) for r in calibrated)
+    false_pass = sum(r.passed and not r.within(PASS_OK) for r in calibrated)
+    false_fail = sum(not r.passed and r.within(SUCCESS) for r in calibrated)
+    failed_worse = sum(not r.passed and not r.within(SUCCESS) for r in calibrated)
+    refused = n - len(calibrated)
+    ratio_t = [
+        e / max(s, 1e-12)
+        for r in calibrated
+        for e, s in zip(r.translation, r.sigma_translation, strict=False)
+    ]
+    ratio_r = [
+        e / max(s, 1e-12)
+        for r in calibrated
+        for e, s in zip(r.rotation, r.sigma_rotation, strict=False)
+    ]
+
+    def stats(values: Sequence[float], digits: int) -> str:
+        if not values:
+            return "n/a | n/a | n/a | n/a"
+        return " | ".join(
+            f"{x:.{digits}f}"
+            for x in (np.mean(values), np.median(values), _percentile(values, 95), np.max(values))
+        )
+
+    def rms(values: Sequence[float]) -> str:
+        return f"{np.sqrt(np.mean(np.square(values))):.2f}" if values else "n/a"
+
+    seconds = np.mean([r.seconds for r in records]) if records else float("nan")
+    return (
+        f"| {label} | {n} | {success}/{n} ({100 * success / max(n, 1):.0f} %) "
+        f"| {stats(t, 2)} | {stats(rot, 3)} "
+        f"| {passed_ok} | **{false_pass}** | {false_fail} | {failed_worse} | {refused} "
+        f"| {rms(ratio_t)} / {rms(ratio_r)} | {seconds:.1f} |"
+    )
+
+
+TABLE_HEADER = (
+    "| {group} | recordings | success (<= 5 mm, 0.1 deg) "
+    "| mean t (mm) | median t | p95 t | max t "
+    "| mean r (deg) | median r | p95 r | max r "
+    "| passed, within 10 mm / 0.3 deg | false pass | false fail | failed, worse | refused "
+    "| RMS error/sigma t / r | seconds |\n"
+    "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+)
+
+
+def grouped_table(
+    records: Iterable[SeedResult], key: Callable[[SeedResult], str], group: str
+) -> str:
+    """Rows per value of `key` (sorted), then one row over all."""
+    groups: dict[str, list[SeedResult]] = defaultdict(list)
+    everything = list(records)
+    for record in everything:
+        groups[key(record)].append(record)
+    rows = [summary_row(name, groups[name]) for name in sorted(groups)]
+    rows.append(summary_row("**all**", everything))
+    return "\n".join([TABLE_HEADER.format(group=group), *rows])
+
+
+def report(records: Sequence[SeedResult], methods: Sequence[str]) -> str:
+    """The markdown report: per method, by class and by each axis of the class and the clock."""
+    out: list[str] = []
+    for method in methods:
+        mine = [r for r in records if r.method == method]
+        out.append(f"## {method}: per scenario class\n")
+        out.append(grouped_table(mine, lambda r: r.scenario_class, "class"))
+        for index, axis in enumerate(("routine", "sensors", "errors")):
+            out.append(f"\n## {method}: per {axis}\n")
+            out.append(grouped_table(mine, lambda r, i=index: r.scenario_class.split("/")[i], axis))
+        out.append(f"\n## {method}: per header clock\n")
+        out.append(grouped_table(mine, lambda r: r.clock, "clock"))
+        out.append("")
+    for method, baseline in PAIRS:
+        if method in methods and baseline in methods:
+            out.append(f"## {method} against {baseline}, recording by recording\n")
+            out.append(paired_table(as_trials(records), method, baseline))
+            out.append("")
+    return "\n".join(out)
+
+
+def as_trials(records: Iterable[SeedResult]) -> dict[str, list[dict[str, Trial]]]:
+    """`bench_calibration`'s layout (class -> per seed -> method -> Trial), refusals left out."""
+    by_seed: dict[int, dict[str, Trial]] = defaultdict(dict)
+    classes: dict[int, str] = {}
+    for r in records:
+        if r.refused is None:
+            by_seed[r.seed][r.method] = Trial(r.translation, r.rotation, r.seconds, passed=r.passed)
+            classes[r.seed] = r.scenario_class
+    grouped: dict[str, list[dict[str, Trial]]] = defaultdict(list)
+    for seed in sorted(by_seed):
+        grouped[classes[seed]].append(by_seed[seed])
+    return dict(sorted(grouped.items()))
+
+
+# -- main ------------------------------------------------------------------------------------
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
+    parser.add_argument("--seeds", default="1000-1099", help="e.g. 1000-1099, 7 or 1,5,9-11")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--rate-scale", type=float, default=1.0, help="LiDAR point rate (1: full)")
+    parser.add_argument("--cache", type=Path, default=Path("/tmp/fleetcal-bench-random"))
+    parser.add_argument("--methods", nargs="*", default=["proposed"], choices=list(CONFIG_METHODS))
+    args = parser.parse_args(argv)
+    seeds = parse_seeds(args.seeds)
+    if args.jobs < 1 or not args.rate_scale > 0:
+        raise SystemExit("--jobs must be 1 or more and --rate-scale positive")
+    print(
+        f"bench_random: {len(seeds)} seeds, rate x{args.rate_scale:g}, {args.jobs} jobs, "
+        f"methods {', '.join(args.methods)}, cache {args.cache}",
+        file=sys.stderr,
+        flush=True,
+    )
+    records: list[SeedResult] = []
+    started = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {
+            pool.submit(run_seed, args.cache, args.rate_scale, seed, args.methods): seed
+            for seed in seeds
+        }
+        for done, future in enumerate(as_completed(futures), start=1):
+            results = future.result()
+            records += results
+            summary = "; ".join(f"{r.method} {describe(r)}" for r in results)
+            print(
+                f"[{done}/{len(seeds)}, {time.perf_counter() - started:.0f} s] seed "
+                f"{futures[future]} {results[0].scenario_class} ({results[0].clock}): {summary}",
+                file=sys.stderr,
+                flush=True,
+            )
+    records.sort(key=lambda r: (r.method, r.seed))
+    print(f"# bench_random: seeds {args.seeds}, rate scale {args.rate_scale:g}\n")
+    print(report(records, args.methods))
+
+
+if __name__ == "__main__":
+    main()
