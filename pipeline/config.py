@@ -1,7 +1,9 @@
 """`PipelineConfig`: every parameter of the pipeline, one frozen config per stage, paper defaults.
 
 Defaults -> YAML file (`load_config`, unknown keys rejected); `resolved` is the full config as
-plain data and `config_hash` its `sha256:` digest, both stored with every result.
+plain data and `config_hash` its `sha256:` digest, both stored with every result. A section given
+in part keeps `PipelineConfig`'s defaults for the rest, also where they differ from the section
+class's own.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pipeline.denoise import DenoiseConfig
 from pipeline.errors import ConfigError
@@ -63,6 +65,29 @@ class PipelineConfig(BaseModel):
     metric: MetricConfig = MetricConfig()
     observability: ObservabilityConfig = ObservabilityConfig()
     verdict: VerdictConfig = VerdictConfig()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _partial_sections_keep_these_defaults(cls, data: Any) -> Any:
+        """A section given as a mapping (YAML, an upload's JSON) changes only what it names: the
+        rest keeps this class's defaults, so `denoise: {k: 20}` keeps stage 1's density ratio 2.5
+        (the `DenoiseConfig` class says 1.8). A section given as a model instance is taken whole."""
+        if not isinstance(data, Mapping):
+            return data
+        return _overlay(cls.model_construct(), data)
+
+
+def _overlay(defaults: BaseModel, given: Mapping[str, Any]) -> dict[str, Any]:
+    """Every field of `defaults`, with `given` on top; sections given as mappings are overlaid
+    on their default section in turn (nested sections such as `reader.stops` too). Unknown keys
+    pass through for validation to refuse."""
+    merged: dict[str, Any] = {name: getattr(defaults, name) for name in type(defaults).model_fields}
+    for name, value in given.items():
+        default = merged.get(name)
+        if isinstance(default, BaseModel) and isinstance(value, Mapping):
+            value = _overlay(default, value)
+        merged[name] = value
+    return merged
 
 
 def config_from_mapping(data: Mapping[str, Any] | None) -> PipelineConfig:
