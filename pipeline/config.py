@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +88,36 @@ def _overlay(defaults: BaseModel, given: Mapping[str, Any]) -> dict[str, Any]:
             value = _overlay(default, value)
         merged[name] = value
     return merged
+
+
+def named_lidar_frames(config: PipelineConfig) -> dict[str, tuple[str, ...]]:
+    """The LiDAR frames the pipeline's settings name, by setting. The reader's own setting that
+    names frames (`reader.extrinsics`) it checks itself, into the recording's warnings, where it
+    knows how it spells a frame (`/lidar_front` is `lidar_front`)."""
+    reference = config.frames.reference_frame
+    return {
+        "frames.reference_frame": () if reference is None else (reference,),
+        "denoise.scan_patterns": tuple(config.denoise.scan_patterns),
+        "denoise.optical_axes": tuple(config.denoise.optical_axes),
+    }
+
+
+def unknown_frame_warnings(
+    config: PipelineConfig, lidar_frames: Collection[str]
+) -> tuple[str, ...]:
+    """One warning per setting that names LiDAR frames missing from `lidar_frames` (the
+    recording's): a misspelt frame would otherwise be ignored without a word."""
+    known = ", ".join(sorted(lidar_frames)) or "none"
+    warnings = []
+    for setting, frames in named_lidar_frames(config).items():
+        unknown = [frame for frame in frames if frame not in lidar_frames]
+        if unknown:
+            warnings.append(
+                f"the config's {setting} names {', '.join(map(repr, unknown))}, which the "
+                f"recording does not have (its LiDAR frames: {known}); that entry is ignored: "
+                "correct the frame name or remove it"
+            )
+    return tuple(warnings)
 
 
 def config_from_mapping(data: Mapping[str, Any] | None) -> PipelineConfig:
