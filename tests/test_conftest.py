@@ -16,6 +16,7 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 NEEDS_POSTGRES = "tests/service/test_db.py::test_foreign_keys_are_enforced[postgres]"
 NEEDS_CHROMIUM = "tests/service/dashboard/test_browser.py::test_a_wrong_key_is_refused_in_the_form"
+PYTEST = (sys.executable, "-m", "pytest", "-n", "0", "-p", "no:cacheprovider", "-q", "-rfEs")
 
 
 def closed_port() -> int:
@@ -25,7 +26,8 @@ def closed_port() -> int:
 
 
 def run_without_servers(tmp_path: Path, ci: str | None) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if k not in {"CI", "FLEETCAL_CHROMIUM", "FLEETCAL_CHROMEDRIVER"}}
+    dropped = {"CI", "FLEETCAL_CHROMIUM", "FLEETCAL_CHROMEDRIVER"}
+    env = {name: value for name, value in os.environ.items() if name not in dropped}
     env |= {
         "FLEETCAL_TEST_PG_ADMIN_DSN": f"postgresql://postgres@127.0.0.1:{closed_port()}/postgres",
         "PATH": str(tmp_path),  # no chromium, no chromedriver
@@ -34,8 +36,7 @@ def run_without_servers(tmp_path: Path, ci: str | None) -> subprocess.CompletedP
     if ci is not None:
         env["CI"] = ci
     return subprocess.run(
-        [sys.executable, "-m", "pytest", "-n", "0", "-p", "no:cacheprovider", "-q", "-rfEs"]
-        + [NEEDS_POSTGRES, NEEDS_CHROMIUM],
+        [*PYTEST, NEEDS_POSTGRES, NEEDS_CHROMIUM],
         cwd=REPO_ROOT,
         env=env,
         capture_output=True,
