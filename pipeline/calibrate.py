@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.config import FramesConfig, PipelineConfig, config_hash
+from pipeline.config import FramesConfig, PipelineConfig, config_hash, unknown_frame_warnings
 from pipeline.denoise import DenoiseConfig, DenoiseResult, KeepMask, denoise
 from pipeline.errors import BadInputError
 from pipeline.metric import metric_error
@@ -83,7 +83,8 @@ class CalibrationResult:
 
     `lidars` has the reference first, then the others in sorted order. `T_odom_base` (J, 4, 4):
     the refined stop poses of the base in the odometry frame. `error_per_iteration`: eq. 11 of
-    stage 4 per iteration (metres).
+    stage 4 per iteration (metres). `warnings`: what the user should fix or know, the recording's
+    (`recording.warnings`) and the config's settings that name LiDAR frames it does not have.
     """
 
     reference_frame: str
@@ -102,6 +103,7 @@ class CalibrationResult:
     pipeline_version: str
     optimisation: OptimisationResult
     rough_refinement: RoughRefinementResult | None
+    warnings: tuple[str, ...] = ()
 
     @property
     def passed(self) -> bool:
@@ -509,6 +511,10 @@ def calibrate(
         pipeline_version=__version__,
         optimisation=result,
         rough_refinement=rough,
+        warnings=(
+            *(problem.recording.warnings if problem.recording is not None else ()),
+            *unknown_frame_warnings(config, problem.frames),
+        ),
     )
 
 

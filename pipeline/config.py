@@ -1,19 +1,21 @@
 """`PipelineConfig`: every parameter of the pipeline, one frozen config per stage, paper defaults.
 
 Defaults -> YAML file (`load_config`, unknown keys rejected); `resolved` is the full config as
-plain data and `config_hash` its `sha256:` digest, both stored with every result.
+plain data and `config_hash` its `sha256:` digest, both stored with every result. A section given
+in part keeps `PipelineConfig`'s defaults for the rest, also where they differ from the section
+class's own.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pipeline.denoise import DenoiseConfig
 from pipeline.errors import ConfigError
@@ -63,6 +65,59 @@ class PipelineConfig(BaseModel):
     metric: MetricConfig = MetricConfig()
     observability: ObservabilityConfig = ObservabilityConfig()
     verdict: VerdictConfig = VerdictConfig()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _partial_sections_keep_these_defaults(cls, data: Any) -> Any:
+        """A section given as a mapping (YAML, an upload's JSON) changes only what it names: the
+        rest keeps this class's defaults, so `denoise: {k: 20}` keeps stage 1's density ratio 2.5
+        (the `DenoiseConfig` class says 1.8). A section given as a model instance is taken whole."""
+        if not isinstance(data, Mapping):
+            return data
+        return _overlay(cls.model_construct(), data)
+
+
+def _overlay(defaults: BaseModel, given: Mapping[str, Any]) -> dict[str, Any]:
+    """Every field of `defaults`, with `given` on top; sections given as mappings are overlaid
+    on their default section in turn (nested sections such as `reader.stops` too). Unknown keys
+    pass through for validation to refuse."""
+    merged: dict[str, Any] = {name: getattr(defaults, name) for name in type(defaults).model_fields}
+    for name, value in given.items():
+        default = merged.get(name)
+        if isinstance(default, BaseModel) and isinstance(value, Mapping):
+            value = _overlay(default, value)
+        merged[name] = value
+    return merged
+
+
+def named_lidar_frames(config: PipelineConfig) -> dict[str, tuple[str, ...]]:
+    """The LiDAR frames the pipeline's settings name, by setting. The reader's own setting that
+    names frames (`reader.extrinsics`) it checks itself, into the recording's warnings, where it
+    knows how it spells a frame (`/lidar_front` is `lidar_front`)."""
+    reference = config.frames.reference_frame
+    return {
+        "frames.reference_frame": () if reference is None else (reference,),
+        "denoise.scan_patterns": tuple(config.denoise.scan_patterns),
+        "denoise.optical_axes": tuple(config.denoise.optical_axes),
+    }
+
+
+def unknown_frame_warnings(
+    config: PipelineConfig, lidar_frames: Collection[str]
+) -> tuple[str, ...]:
+    """One warning per setting that names LiDAR frames missing from `lidar_frames` (the
+    recording's): a misspelt frame would otherwise be ignored without a word."""
+    known = ", ".join(sorted(lidar_frames)) or "none"
+    warnings = []
+    for setting, frames in named_lidar_frames(config).items():
+        unknown = [frame for frame in frames if frame not in lidar_frames]
+        if unknown:
+            warnings.append(
+                f"the config's {setting} names {', '.join(map(repr, unknown))}, which the "
+                f"recording does not have (its LiDAR frames: {known}); that entry is ignored: "
+                "correct the frame name or remove it"
+            )
+    return tuple(warnings)
 
 
 def config_from_mapping(data: Mapping[str, Any] | None) -> PipelineConfig:

@@ -149,6 +149,52 @@ def _extrinsic(base: str, frame: str, entry: Mapping[str, Any], is_reference: bo
     )
 
 
+@dataclass(frozen=True)
+class RecordingCheck:
+    """How a recording compares with the result about to be written into it. `mismatches`: why
+    it is not the recording the result calibrated (refuse unless told otherwise); `notes`: what
+    the user should know all the same."""
+
+    mismatches: tuple[str, ...]
+    notes: tuple[str, ...]
+
+
+def check_recording(
+    document: Mapping[str, Any],
+    lidar_frames: Mapping[str, str],
+    *,
+    sha256: str | None = None,
+    calibrated_sha256: str | None = None,
+) -> RecordingCheck:
+    """Compare a recording's LiDARs (`lidar_frames`: `{topic: frame}`) and, where both are known,
+    its SHA-256 with those of the recording `document` calibrated (`calibrated_sha256`: a run's
+    upload). Every LiDAR of the result must be in the recording, on the same topic."""
+    lidars: Mapping[str, Any] = document.get("lidars") or {}
+    recorded = {frame: topic for topic, frame in lidar_frames.items()}
+    listing = ", ".join(f"{frame} on {topic}" for frame, topic in sorted(recorded.items()))
+    mismatches, notes = [], []
+    missing = sorted(frame for frame in lidars if frame not in recorded)
+    if missing:
+        mismatches.append(f"it has no LiDAR {', '.join(missing)} (its LiDARs: {listing or 'none'})")
+    for frame, entry in sorted(lidars.items()):
+        topic = entry.get("topic") if isinstance(entry, Mapping) else None
+        if frame in recorded and topic and topic != recorded[frame]:
+            mismatches.append(f"its {frame} is on {recorded[frame]}, the result's on {topic}")
+    if calibrated_sha256 and sha256 and sha256.lower() != calibrated_sha256.lower():
+        mismatches.append(
+            f"its SHA-256 is {sha256}, the calibrated upload's {calibrated_sha256.lower()}"
+        )
+    elif calibrated_sha256 and not sha256:
+        notes.append(
+            f"its SHA-256 was not compared with the calibrated upload's ({calibrated_sha256}): "
+            "it is a bag directory, not the file uploaded; its LiDARs were"
+        )
+    extra = sorted(frame for frame in recorded if frame not in lidars)
+    if extra:
+        notes.append(f"{', '.join(extra)}: not in the result, kept with the recorded extrinsics")
+    return RecordingCheck(tuple(mismatches), tuple(notes))
+
+
 # -- formats ---------------------------------------------------------------------------------------
 
 

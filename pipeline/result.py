@@ -4,10 +4,10 @@ Contract fields, never renamed: schema_version, reference_frame, base_frame, lid
 initial, calibrated, stddev}}, metric_error{initial, final}, verdict{passed, checks[]},
 stages{name: {seconds, ...}}, pipeline_version, config_hash. Added here: per LiDAR
 `undetermined`, `object_points`, `change` and `metric_error`; per check `detail` (and `dofs`);
-top level `iterations`, `converged`, `error_per_iteration`, `stops` (refined `T_odom_base`) and
-`config` (resolved). A LiDAR with undetermined degrees of freedom gets `"calibrated": null` and
-null stddev for those DoF: never a confident number. Non-finite numbers become null (JSON has no
-NaN).
+top level `warnings` (the recording's, and config settings naming frames it lacks), `iterations`,
+`converged`, `error_per_iteration`, `stops` (refined `T_odom_base`) and `config` (resolved).
+A LiDAR with undetermined degrees of freedom gets `"calibrated": null` and null stddev for those
+DoF: never a confident number. Non-finite numbers become null (JSON has no NaN).
 """
 
 from __future__ import annotations
@@ -117,6 +117,7 @@ def result_document(
         "stages": stages,
         "pipeline_version": result.pipeline_version,
         "config_hash": result.config_hash,
+        "warnings": list(result.warnings),
         "iterations": result.iterations,
         "converged": result.converged,
         "error_per_iteration": [_number(e) for e in result.error_per_iteration],

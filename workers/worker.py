@@ -297,6 +297,8 @@ class Worker:
                 seconds,
                 "passed" if passed else "not passed",
             )
+            for warning in document.get("warnings") or ():
+                log.warning("run %s: %s", held.run_id, warning)
             break
         else:
             # Nothing more to do here: the lease lapses and the reaper retries the run.

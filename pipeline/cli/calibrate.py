@@ -72,6 +72,8 @@ def calibrate_command(
             raise BadInputError(
                 f"cannot write {output}: {err.strerror or err}; choose a writable path"
             ) from None
+    for warning in result.warnings:
+        progress(f"warning: {warning}")
     typer.echo(summary(result))
     raise typer.Exit(EXIT_OK if result.passed else EXIT_FAILED_VERDICT)
 

@@ -3,6 +3,7 @@ the form a robot's configuration takes, from a `result.json` on disk or a run on
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from pathlib import Path
@@ -54,12 +55,21 @@ def export_command(
         Path | None,
         typer.Option(
             "--recording",
-            help="the recording the result was calibrated from (format recording); for a run id "
-            "the service makes the copy from the run's upload",
+            help="the recording the result was calibrated from (format recording): its LiDARs, and "
+            "its SHA-256 where the run's upload gives it, must be the result's (see --force); "
+            "for a run id without it the service makes the copy from the run's upload",
         ),
     ] = None,
     allow_failed: Annotated[
         bool, typer.Option("--allow-failed", help="export a result whose verdict failed")
+    ] = False,
+    force: Annotated[
+        bool,
+        typer.Option(
+            "--force",
+            help="write into a --recording that is not the one calibrated (other LiDARs or "
+            "topics, another SHA-256 than the run's upload)",
+        ),
     ] = False,
     url: Annotated[
         str, typer.Option("--url", envvar="FLEETCAL_URL", help="the fleetcal service")
@@ -76,7 +86,9 @@ def export_command(
     with user_errors():
         run_id = None if Path(source).exists() else _run_id(source)
         service = _Service(url, api_key) if run_id is not None else None
-        document = service.result(run_id) if service and run_id else _load(Path(source))
+        document, upload_sha256 = (
+            service.result(run_id) if service and run_id else _load(Path(source))
+        )
         where = f"run {run_id}" if run_id else str(source)
         if fmt is not ExportFormat.RECORDING:
             text = render(document, fmt, allow_failed=allow_failed, source=where)
@@ -94,6 +106,7 @@ def export_command(
             from pipeline.io.retag import write_calibrated_recording
 
             extrinsics = calibrated_extrinsics(document, allow_failed=allow_failed)
+            _check_recording(document, recording, upload_sha256, force=force)
             written = write_calibrated_recording(
                 recording,
                 out,
@@ -122,7 +135,37 @@ def _run_id(text: str) -> str:
     return text
 
 
-def _load(path: Path) -> dict[str, Any]:
+def _check_recording(
+    document: dict[str, Any], recording: Path, upload_sha256: str | None, *, force: bool
+) -> None:
+    """Refuse (unless `force`) a recording other than the one `document` calibrated; warn about
+    what the copy leaves as recorded."""
+    from pipeline.export import check_recording
+    from pipeline.io.lidar_frames import lidar_frames
+
+    sha256 = _sha256(recording) if upload_sha256 and recording.is_file() else None
+    check = check_recording(
+        document, lidar_frames(recording), sha256=sha256, calibrated_sha256=upload_sha256
+    )
+    if check.mismatches and not force:
+        raise BadInputError(
+            f"{recording} is not the recording this result calibrated: "
+            f"{'; '.join(check.mismatches)}. Pass the recording it was calibrated from as "
+            "--recording, or --force to write the calibration into this one anyway"
+        )
+    for line in (*check.mismatches, *check.notes):
+        progress(f"warning: {recording}: {line}")
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as stream:
+        while chunk := stream.read(1024 * 1024):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _load(path: Path) -> tuple[dict[str, Any], str | None]:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as err:
@@ -130,18 +173,23 @@ def _load(path: Path) -> dict[str, Any]:
     return _result_of(data, str(path))
 
 
-def _result_of(data: Any, where: str) -> dict[str, Any]:
-    """The result document, given it or a run document (`GET /v1/runs/{id}`) holding it."""
+def _result_of(data: Any, where: str) -> tuple[dict[str, Any], str | None]:
+    """The result document, given it or a run document (`GET /v1/runs/{id}`) holding it, and the
+    SHA-256 of the recording it calibrated where known (a run document's upload)."""
+    sha256 = None
     if isinstance(data, dict) and "lidars" not in data and "status" in data:
         if not isinstance(data.get("result"), dict):
             raise BadInputError(
                 f"{where}: the run is {data.get('status')} and has no result yet; export it "
                 "once it has succeeded"
             )
+        upload = data.get("upload")
+        if isinstance(upload, dict) and isinstance(upload.get("sha256"), str):
+            sha256 = upload["sha256"]
         data = data["result"]
     if not isinstance(data, dict):
         raise BadInputError(f"{where} is not a fleetcal result document")
-    return data
+    return data, sha256
 
 
 class _Service:
@@ -156,7 +204,7 @@ class _Service:
         self.url = url.rstrip("/")
         self.headers = {"X-API-Key": api_key}
 
-    def result(self, run_id: str) -> dict[str, Any]:
+    def result(self, run_id: str) -> tuple[dict[str, Any], str | None]:
         import httpx
 
         try:

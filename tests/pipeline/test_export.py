@@ -20,7 +20,9 @@ from scipy.spatial.transform import Rotation
 from pipeline.export import (
     ExportError,
     ExportFormat,
+    RecordingCheck,
     calibrated_extrinsics,
+    check_recording,
     extrinsics_yaml,
     render,
     tf_static_launch,
@@ -267,3 +269,53 @@ def test_a_damaged_document_is_refused(damage: Any, message: str) -> None:
 def test_the_recording_is_not_a_text_export() -> None:
     with pytest.raises(ExportError, match="not a text export"):
         render(set1_document(), "recording")
+
+
+# -- the recording a calibration is written into ------------------------------------------------
+
+RECORDED = {"/lidar_front/points": "lidar_front", "/lidar_rear/points": "lidar_rear"}
+
+
+def two_lidars() -> dict[str, Any]:
+    doc = set1_document()
+    del doc["lidars"]["lidar_left"]
+    return doc
+
+
+def test_the_recording_calibrated_matches() -> None:
+    check = check_recording(two_lidars(), RECORDED, sha256="ab" * 32, calibrated_sha256="AB" * 32)
+    assert check == RecordingCheck(mismatches=(), notes=())
+
+
+@pytest.mark.parametrize(
+    ("recorded", "sha256", "mismatch"),
+    [
+        (
+            {"/lidar_front/points": "lidar_front"},
+            None,
+            "it has no LiDAR lidar_rear (its LiDARs: lidar_front on /lidar_front/points)",
+        ),
+        (
+            {"/lidar_front/points": "lidar_front", "/points": "lidar_rear"},
+            None,
+            "its lidar_rear is on /points, the result's on /lidar_rear/points",
+        ),
+        (RECORDED, "cd" * 32, f"its SHA-256 is {'cd' * 32}, the calibrated upload's {'ab' * 32}"),
+    ],
+)
+def test_another_recording_is_a_mismatch(
+    recorded: dict[str, str], sha256: str | None, mismatch: str
+) -> None:
+    check = check_recording(two_lidars(), recorded, sha256=sha256, calibrated_sha256="ab" * 32)
+    assert mismatch in check.mismatches
+
+
+def test_what_the_copy_leaves_as_recorded_is_noted() -> None:
+    recorded = {**RECORDED, "/lidar_top/points": "lidar_top"}
+    check = check_recording(two_lidars(), recorded, sha256=None, calibrated_sha256="ab" * 32)
+    assert check.mismatches == ()
+    assert check.notes == (
+        f"its SHA-256 was not compared with the calibrated upload's ({'ab' * 32}): it is a bag "
+        "directory, not the file uploaded; its LiDARs were",
+        "lidar_top: not in the result, kept with the recorded extrinsics",
+    )

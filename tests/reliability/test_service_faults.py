@@ -23,6 +23,7 @@ from service.db import Database
 from service.models import RunStatus
 from service.settings import Settings
 from service.storage import LocalStorage
+from tests.conftest import unavailable
 from tests.reliability.harness import (
     free_port,
     processes,
@@ -192,7 +193,7 @@ def private_postgres() -> Iterator[tuple[str, list[str]]]:
     it disturbs no other test. Yields its URL and the pg_ctl command line (without the action)."""
     bindir = _postgres_bin()
     if bindir is None:
-        pytest.skip("no PostgreSQL server binaries in /usr/lib/postgresql")
+        unavailable("no PostgreSQL server binaries in /usr/lib/postgresql")
     as_user: list[str] = []
     scratch = Path(tempfile.mkdtemp(prefix="fleetcal-pg-"))
     if os.geteuid() == 0:  # initdb refuses to run as root

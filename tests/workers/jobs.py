@@ -20,7 +20,8 @@ SCRIPTED = "tests.workers.jobs:scripted"
 
 def scripted(spec: JobSpec, report: Report) -> dict[str, Any]:
     """Config keys: `sleep` (s), `fail` ("bad_input" | "storage"), `die_on_attempts` (list of
-    attempt numbers on which the process kills itself), `report_environment` (bool)."""
+    attempt numbers on which the process kills itself), `report_environment` (bool), `warnings`
+    (the result's)."""
     script = spec.config or {}
     report("work", 0.5)
     if spec.attempt in script.get("die_on_attempts", ()):
@@ -32,6 +33,8 @@ def scripted(spec: JobSpec, report: Report) -> dict[str, Any]:
         raise StorageError("cannot read the recording: connection reset by peer")
     document = result_document()
     document["worker"] = {"pid": os.getpid(), "attempt": spec.attempt}
+    if "warnings" in script:
+        document["warnings"] = script["warnings"]
     if script.get("report_environment"):
         document["worker"]["environment"] = {v: os.environ.get(v) for v in BLAS_THREAD_VARIABLES}
     return document

@@ -48,6 +48,17 @@ def test_runs_succeed_with_their_result_and_pinned_blas_threads(
         assert result.document["worker"]["environment"] == dict.fromkeys(BLAS_THREAD_VARIABLES, "1")
 
 
+def test_the_results_warnings_go_to_the_workers_log(
+    settings: Settings, db: Database, caplog: pytest.LogCaptureFixture
+) -> None:
+    warning = "the config's denoise.scan_patterns names 'lidar_top', which the recording lacks"
+    run_id = enqueue(db, config={"warnings": [warning]})
+    with caplog.at_level(logging.WARNING, logger="workers.worker"), running_worker(settings):
+        # The worker logs them after it has stored the result: wait for the line itself.
+        wait_for("the warning", lambda: f"run {run_id}: {warning}" in caplog.messages)
+    assert run_row(db, run_id).status == RunStatus.SUCCEEDED
+
+
 def test_bad_input_fails_the_run_at_once_with_the_typed_message(
     settings: Settings, db: Database
 ) -> None:

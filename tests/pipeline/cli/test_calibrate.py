@@ -61,6 +61,29 @@ def test_a_failed_verdict_exits_1_and_names_the_failed_checks(
     assert "verdict: FAILED" in result.stdout and "metric_error" in result.stdout
 
 
+def test_config_frames_the_recording_lacks_are_warned_about(
+    box_recording: Path, tmp_path: Path
+) -> None:
+    config = tmp_path / "config.yaml"
+    config.write_text(
+        "reader:\n  extrinsics:\n    lidar_top: {translation: [0.0, 0.0, 1.0]}\n"
+        "denoise:\n  scan_patterns:\n    lidar_top: repetitive\n"
+        "  optical_axes:\n    lidar_side: [0.0, 1.0, 0.0]\n"
+    )
+    output = tmp_path / "result.json"
+    result = run(str(box_recording), "-o", str(output), "--config", str(config))
+    assert result.exit_code == 0, result.output
+    warnings = json.loads(output.read_text())["warnings"]
+    for setting, frame in [("scan_patterns", "lidar_top"), ("optical_axes", "lidar_side")]:
+        [warning] = [w for w in warnings if f"denoise.{setting}" in w]
+        assert f"names {frame!r}" in warning
+        assert "(its LiDAR frames: lidar_front, lidar_rear)" in warning
+        assert f"warning: {warning}" in result.stderr
+    # The reader's own check of reader.extrinsics reaches the result and the output too.
+    [reader_warning] = [w for w in warnings if "extrinsics for 'lidar_top'" in w]
+    assert f"warning: {reader_warning}" in result.stderr
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [

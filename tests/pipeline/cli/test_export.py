@@ -3,8 +3,10 @@ calibrated recording reads back, and refusals exit 2 with a message."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 import typer
@@ -54,14 +56,23 @@ def test_out_writes_a_file_and_a_run_document_is_accepted(tmp_path: Path) -> Non
     assert f"source: {saved}" in out.read_text()
 
 
+def true_document() -> dict[str, Any]:
+    """A result whose calibrated extrinsics are those `write_recording` records as true."""
+    document = set1_document()
+    document["lidars"] = {
+        frame: {
+            "topic": f"/{frame}/points",
+            "calibrated": {"translation": t.tolist(), "rotation_xyzw": q.tolist()},
+        }
+        for frame, (t, q) in ((f, to_translation_xyzw(T)) for f, T in TRUE_EXTRINSICS.items())
+    }
+    return document
+
+
 def test_the_calibrated_recording_reads_back(tmp_path: Path) -> None:
     recording = tmp_path / "rec"
     write_recording(recording, WriterFormat.ROS2_MCAP, Spec(stops=2, points=60))
-    document = set1_document()
-    document["lidars"] = {
-        frame: {"calibrated": {"translation": t.tolist(), "rotation_xyzw": q.tolist()}}
-        for frame, (t, q) in ((f, to_translation_xyzw(T)) for f, T in TRUE_EXTRINSICS.items())
-    }
+    document = true_document()
     result_json = tmp_path / "result.json"
     result_json.write_text(json.dumps(document))
     out = tmp_path / "calibrated"
@@ -69,6 +80,54 @@ def test_the_calibrated_recording_reads_back(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "base_link->rear_mount" in result.output
     assert_recording_has(out, document)
+
+
+def test_a_recording_of_other_lidars_is_refused_unless_forced(tmp_path: Path) -> None:
+    other = tmp_path / "other-robot"
+    write_recording(other, WriterFormat.ROS2_MCAP, Spec(stops=2, points=60, frame_prefix="r2_"))
+    result_json = tmp_path / "result.json"
+    result_json.write_text(json.dumps(true_document()))
+    out = tmp_path / "calibrated"
+    args = [str(result_json), "-f", "recording", "--recording", str(other), "-o", str(out)]
+
+    refused = run(*args)
+    assert refused.exit_code == 2, refused.output
+    assert f"{other} is not the recording this result calibrated: it has no LiDAR " in (
+        refused.stderr
+    )
+    assert "lidar_front, lidar_rear (its LiDARs: r2_lidar_front on " in refused.stderr
+    assert "--force" in refused.stderr and not out.exists()
+
+    forced = run(*args, "--force")
+    assert forced.exit_code == 0, forced.output
+    assert f"warning: {other}: it has no LiDAR lidar_front, lidar_rear" in forced.stderr
+    assert "r2_lidar_front, r2_lidar_rear: not in the result, kept with the recorded" in (
+        forced.stderr
+    )
+    assert out.exists()
+
+
+def test_a_run_documents_upload_must_be_the_recording(tmp_path: Path) -> None:
+    recording = tmp_path / "rec.bag"
+    write_recording(recording, WriterFormat.ROS1, Spec(stops=2, points=60))
+    sha256 = hashlib.sha256(recording.read_bytes()).hexdigest()
+    saved = tmp_path / "run.json"
+
+    def export(upload_sha256: str, out: Path) -> Result:
+        run_document = {"status": "succeeded", "upload": {"sha256": upload_sha256}}
+        saved.write_text(json.dumps(run_document | {"result": true_document()}))
+        return run(str(saved), "-f", "recording", "--recording", str(recording), "-o", str(out))
+
+    other = "ab" * 32
+    refused = export(other, tmp_path / "refused.bag")
+    assert refused.exit_code == 2, refused.output
+    assert f"its SHA-256 is {sha256}, the calibrated upload's {other}" in refused.stderr
+    assert not (tmp_path / "refused.bag").exists()
+
+    written = export(sha256.upper(), tmp_path / "written.bag")
+    assert written.exit_code == 0, written.output
+    assert "warning" not in written.stderr
+    assert_recording_has(tmp_path / "written.bag", true_document())
 
 
 def test_a_failed_verdict_exits_2_unless_allowed(tmp_path: Path) -> None:

@@ -29,6 +29,7 @@ from service.db import Database
 from service.models import Scope
 from service.settings import Settings
 from service.storage import make_storage
+from tests.conftest import unavailable
 from tests.service.conftest import Api
 from tests.service.dashboard.seed import Fleet, recording_bytes, report_images, seed_fleet
 
@@ -134,11 +135,12 @@ def _which(names: tuple[str, ...], env: str) -> str | None:
 
 @pytest.fixture(scope="module")
 def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
-    """Headless Chromium through chromedriver; skipped (with the reason) only if not installed."""
+    """Headless Chromium through chromedriver; skipped (with the reason) only if not installed,
+    and failed then under CI=true."""
     chromium = _which(CHROMIUM_NAMES, "FLEETCAL_CHROMIUM")
     driver_path = _which(CHROMEDRIVER_NAMES, "FLEETCAL_CHROMEDRIVER")
     if chromium is None or driver_path is None:
-        pytest.skip(
+        unavailable(
             "headless Chromium is not installed (Debian: apt-get install chromium chromium-driver; "
             "or set FLEETCAL_CHROMIUM and FLEETCAL_CHROMEDRIVER); CI installs it"
         )
