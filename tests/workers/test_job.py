@@ -3,6 +3,8 @@ tolerance profile; an upload cannot set (loosen) its own verdict."""
 
 from __future__ import annotations
 
+import itertools
+
 import pytest
 
 from pipeline.config import PipelineConfig
@@ -32,3 +34,16 @@ def test_an_upload_cannot_set_its_verdict() -> None:
 def test_an_unknown_setting_is_a_config_error_naming_it() -> None:
     with pytest.raises(ConfigError, match=r"optimisation\.max_iteration"):
         pipeline_config_for({"optimisation": {"max_iteration": 5}}, {})
+
+
+def test_optimisation_progress_moves_at_every_iteration_and_stays_in_its_stage() -> None:
+    from workers.job import _STAGE_PROGRESS, optimisation_progress
+
+    values = [optimisation_progress(k, 200) for k in range(0, 201)]
+    assert values[0] == _STAGE_PROGRESS["optimisation"]
+    assert all(b > a for a, b in itertools.pairwise(values))
+    assert values[-1] == _STAGE_PROGRESS["metric"]
+    # A typical run converges in tens of iterations: by then most of the stage's share is shown.
+    assert values[30] > _STAGE_PROGRESS["optimisation"] + 0.8 * (
+        _STAGE_PROGRESS["metric"] - _STAGE_PROGRESS["optimisation"]
+    )
