@@ -14,7 +14,13 @@ from pydantic import BaseModel, Field
 
 from service import repository
 from service.deps import ReadKey, SessionDep
-from service.pagination import PAGE_SIZE_DEFAULT, PAGE_SIZE_MAX, decode_cursor, encode_cursor
+from service.pagination import (
+    PAGE_SIZE_DEFAULT,
+    PAGE_SIZE_MAX,
+    cursor_robot_id,
+    decode_cursor,
+    encode_cursor,
+)
 from service.problems import PROBLEM_RESPONSES
 from service.routes.runs import run_summary
 from service.schemas import RobotPublic, RunSummary
@@ -63,7 +69,7 @@ def get_fleet(
     cursor: Annotated[str | None, Query(max_length=512)] = None,
 ) -> FleetPage:
     # The cursor of `/v1/robots`: both list robots by id.
-    after = decode_cursor(cursor, "robots", 1)[0] if cursor is not None else None
+    after = decode_cursor(cursor, "robots", cursor_robot_id)[0] if cursor is not None else None
     page = repository.fleet(session, limit=limit + 1, after_id=after)
     rows = page.rows[:limit]
     next_cursor = encode_cursor("robots", rows[-1].robot.id) if len(page.rows) > limit else None
