@@ -17,6 +17,7 @@ from starlette.routing import Match
 
 from pipeline import __version__
 from service import repository
+from service.api_docs import install_api_docs
 from service.dashboard import router as dashboard_router
 from service.db import Database
 from service.deps import Services
@@ -61,7 +62,15 @@ def create_app(settings: Settings) -> FastAPI:
             app.state.services = None
             services.db.dispose()
 
-    app = FastAPI(title="fleetcal", version=__version__, description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(
+        title="fleetcal",
+        version=__version__,
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        docs_url=None,  # install_api_docs: the same pages, their assets served from here
+        redoc_url=None,
+    )
+    install_api_docs(app)
     app.state.services = None
     install_problem_handlers(app)
     app.add_exception_handler(HTTPStatus.METHOD_NOT_ALLOWED, method_not_allowed)

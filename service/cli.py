@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -36,18 +38,50 @@ def register(app: typer.Typer) -> None:
     app.command("openapi")(openapi)
 
 
+EXIT_BAD_SETUP = 2
+
+
+@contextmanager
+def startup_errors() -> Iterator[None]:
+    """Run a command body; a `StartupError` (bad settings, an unreachable database or storage, a
+    busy port) becomes `error: <message>` on stderr and exit code 2, without a traceback."""
+    from service.startup import StartupError
+
+    try:
+        yield
+    except StartupError as err:
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(EXIT_BAD_SETUP) from None
+
+
 def settings_for(data_dir: Path | None) -> Settings:
-    from service.settings import Settings
+    """The settings of a command: `--data-dir` over `FLEETCAL_*`; exit 2 if they are invalid."""
+    from service.startup import load_settings
 
-    return Settings(data_dir=data_dir) if data_dir is not None else Settings()
+    with startup_errors():
+        return load_settings(data_dir)
 
 
-def _database(data_dir: Path | None) -> Database:
-    """The database of `data_dir`, migrated (state is created on first use)."""
-    from service.db import Database
+def _database(data_dir: Path | None, *, create: bool) -> Database:
+    """The database the settings name, migrated, after saying on stderr which one it is. A SQLite
+    file that does not exist yet is created only if `create`: listing or revoking keys in a fresh
+    directory means the command was pointed at the wrong one."""
+    from service.startup import StartupError, open_database, sqlite_file, where_state_lives
 
-    db = Database.from_settings(settings_for(data_dir))
-    db.upgrade()
+    settings = settings_for(data_dir)
+    with startup_errors():
+        file = sqlite_file(settings)
+        new = file is not None and not file.exists()
+        if new and not create:
+            raise StartupError(
+                f"no database in {where_state_lives(settings)}: no service has used it yet; pass "
+                "--data-dir DIR (or set FLEETCAL_DATA_DIR) to the directory `fleetcal serve` uses"
+            )
+        db = open_database(settings, migrate=True)
+    typer.echo(
+        f"using the {where_state_lives(settings)}" + (" (new: created now)" if new else ""),
+        err=True,
+    )
     return db
 
 
@@ -83,7 +117,7 @@ def keys_create(
         raise typer.BadParameter(
             "only --scope upload keys can be bound to a robot", param_hint="--robot"
         )
-    db = _database(data_dir)
+    db = _database(data_dir, create=True)
     try:
         with db.transaction() as session:
             key = create_key(session, list(scope), robot_id=robot, name=name)
@@ -103,7 +137,7 @@ def keys_list(data_dir: DataDirOption = None) -> None:
     """List keys (ids, scopes, robot, state); never the secrets."""
     from service.auth import list_keys
 
-    db = _database(data_dir)
+    db = _database(data_dir, create=False)
     try:
         with db.session() as session:
             rows = list_keys(session)
@@ -126,7 +160,7 @@ def keys_revoke(
     """Revoke a key: requests with it get 401 from now on."""
     from service.auth import revoke_key
 
-    db = _database(data_dir)
+    db = _database(data_dir, create=False)
     try:
         with db.transaction() as session:
             found = revoke_key(session, key_id)
@@ -144,24 +178,27 @@ def db_upgrade(
     data_dir: DataDirOption = None,
 ) -> None:
     """Apply the migrations up to REVISION (default: the newest)."""
-    from service.db import Database
+    from service.startup import open_database, shown_database
 
     settings = settings_for(data_dir)
-    db = Database.from_settings(settings)
+    with startup_errors():
+        db = open_database(settings, migrate=None)
     try:
         db.upgrade(revision)
         current = ", ".join(sorted(db.current_revisions())) or "empty"
     finally:
         db.dispose()
-    typer.echo(f"database {_redacted(settings.resolved_database_url)} at revision {current}")
+    typer.echo(f"database {shown_database(settings)} at revision {current}")
 
 
 @db_app.command("current")
 def db_current(data_dir: DataDirOption = None) -> None:
     """Print the database's revision and whether it is the newest."""
-    from service.db import Database
+    from service.startup import open_database
 
-    db = Database.from_settings(settings_for(data_dir))
+    settings = settings_for(data_dir)
+    with startup_errors():
+        db = open_database(settings, migrate=None)
     try:
         current, head = db.current_revisions(), db.head_revisions()
     finally:
@@ -198,9 +235,3 @@ def openapi(
     output.parent.mkdir(parents=True, exist_ok=True)
     output.write_text(text)
     typer.echo(f"wrote {output}", err=True)
-
-
-def _redacted(url: str) -> str:
-    from sqlalchemy import make_url
-
-    return make_url(url).render_as_string(hide_password=True)

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Annotated
+from urllib.parse import urlsplit
 
-from pydantic import Field, PositiveFloat, PositiveInt, field_validator
+from pydantic import Field, PositiveFloat, PositiveInt, ValidationInfo, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 DEFAULT_DATA_DIR = Path(".fleetcal")
@@ -88,14 +89,23 @@ class Settings(BaseSettings):
     )
     stale_upload_seconds: PositiveInt = Field(
         default=6 * 3600,
-        description="Temporary uploads untouched for this long are left-overs of a killed process "
-        "and are removed at start.",
+        description="At start, S3 multipart uploads begun this long ago are taken for left-overs "
+        "of a killed process and aborted (other API processes may be uploading). Local partial "
+        "uploads go at once when no process holds their lock, locked ones after this long.",
     )
 
     @field_validator("database_url", "storage_url", "s3_endpoint_url", mode="before")
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
         return None if value == "" else value
+
+    @field_validator("database_url", "storage_url")
+    @classmethod
+    def _a_supported_url(cls, value: str | None, info: ValidationInfo) -> str | None:
+        if value is not None:
+            check = check_database_url if info.field_name == "database_url" else check_storage_url
+            check(value)
+        return value
 
     @property
     def resolved_database_url(self) -> str:
@@ -108,3 +118,45 @@ class Settings(BaseSettings):
         if self.storage_url:
             return self.storage_url
         return (self.data_dir / "storage").resolve().as_uri()
+
+
+SUPPORTED_DATABASES = ("sqlite", "postgresql")
+"""The queue needs `BEGIN IMMEDIATE` (SQLite) or `FOR UPDATE SKIP LOCKED` (PostgreSQL)."""
+
+
+def check_database_url(url: str) -> None:
+    """Raise `ValueError` saying what to write if `url` is no SQLAlchemy URL of a supported
+    database whose driver is installed. Nothing is connected to."""
+    from sqlalchemy import make_url
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+
+    example = "sqlite:////abs/path/fleetcal.db or postgresql+psycopg://user:password@host/db"
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        raise ValueError(f"{url!r} is not a database URL; use {example}") from None
+    shown = parsed.render_as_string(hide_password=True)
+    if parsed.get_backend_name() not in SUPPORTED_DATABASES:
+        raise ValueError(
+            f"{shown!r} names the database {parsed.get_backend_name()!r}; fleetcal runs on "
+            f"SQLite or PostgreSQL: use {example}"
+        )
+    try:
+        parsed.get_dialect()
+    except NoSuchModuleError:
+        raise ValueError(
+            f"{shown!r} names the driver {parsed.get_driver_name()!r}, which is not installed; "
+            f"use {example}"
+        ) from None
+
+
+def check_storage_url(url: str) -> None:
+    """Raise `ValueError` saying what to write if `url` is no storage URL fleetcal can use."""
+    parts = urlsplit(url)
+    if parts.scheme == "file" and parts.path.startswith("/"):
+        return
+    if parts.scheme == "s3" and parts.netloc:
+        return
+    raise ValueError(
+        f"unsupported storage URL {url!r}: use file:///absolute/dir or s3://bucket[/prefix]"
+    )

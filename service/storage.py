@@ -1,13 +1,15 @@
 """Object storage for recordings behind one interface: a local directory (default) or an
 S3-compatible bucket. Uploads are written aside and become visible only on `commit`.
 
-Local: a temporary file under `.tmp/`, fsynced and renamed into place. S3: a multipart upload that
-is completed on commit (its parts are invisible until then) or aborted; small objects are one PUT.
+Local: a temporary file under `.tmp/`, locked by its writer, fsynced and renamed into place. S3:
+a multipart upload that is completed on commit (its parts are invisible until then) or aborted;
+small objects are one PUT.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import re
 import shutil
@@ -19,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO, Protocol, cast
 from urllib.parse import unquote, urlsplit
 
-from service.settings import Settings
+from service.settings import Settings, check_storage_url
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
@@ -82,25 +84,22 @@ def validate_key(key: str) -> str:
 def make_storage(settings: Settings) -> Storage:
     """The storage `settings.resolved_storage_url` names (`file://` or `s3://`)."""
     url = settings.resolved_storage_url
+    check_storage_url(url)
     parts = urlsplit(url)
     if parts.scheme == "file":
         return LocalStorage(Path(unquote(parts.path)))
-    if parts.scheme == "s3":
-        if not parts.netloc:
-            raise ValueError(f"storage URL {url!r} names no bucket: use s3://bucket[/prefix]")
-        import boto3  # heavy: only when S3 is configured
-        from botocore.config import Config
+    import boto3  # heavy: only when S3 is configured
+    from botocore.config import Config
 
-        client = boto3.client(
-            "s3",
-            endpoint_url=settings.s3_endpoint_url,
-            region_name=settings.s3_region,
-            config=Config(retries={"max_attempts": 5, "mode": "standard"}),
-        )
-        return S3Storage(
-            client, parts.netloc, parts.path.strip("/"), part_size=settings.s3_part_size_bytes
-        )
-    raise ValueError(f"unsupported storage URL {url!r}: use file:///dir or s3://bucket[/prefix]")
+    client = boto3.client(
+        "s3",
+        endpoint_url=settings.s3_endpoint_url,
+        region_name=settings.s3_region,
+        config=Config(retries={"max_attempts": 5, "mode": "standard"}),
+    )
+    return S3Storage(
+        client, parts.netloc, parts.path.strip("/"), part_size=settings.s3_part_size_bytes
+    )
 
 
 # -- local directory ------------------------------------------------------------------------------
@@ -149,13 +148,21 @@ class LocalStorage:
             raise StorageError(f"cannot write to {self._tmp}: {err.strerror}") from err
 
     def sweep_stale_uploads(self, older_than: timedelta) -> int:
+        """Remove the uploads no process is writing (their writer holds a lock on the file, which
+        the system drops when the process dies, however it dies), at any age; and, as before,
+        those still locked but untouched for `older_than` (a writer hung that long). Safe with
+        several API processes on one storage directory: another process's upload stays locked."""
         cutoff = time.time() - older_than.total_seconds()
         removed = 0
         for part in self._tmp.glob("*.part"):
             with contextlib.suppress(FileNotFoundError):
-                if part.stat().st_mtime < cutoff:
+                if not _locked(part) or part.stat().st_mtime < cutoff:
                     part.unlink()
                     removed += 1
+        for creating in self._tmp.glob("*.creating"):  # a writer killed between two calls
+            with contextlib.suppress(FileNotFoundError):
+                if creating.stat().st_mtime < cutoff:
+                    creating.unlink()
         return removed
 
     def keys_older_than(self, prefix: str, older_than: timedelta) -> Iterator[str]:
@@ -175,11 +182,22 @@ class _LocalUpload:
     def __init__(self, storage: LocalStorage, key: str) -> None:
         self.key = key
         self._final = storage.path(key)
-        self._part = storage._tmp / f"{uuid.uuid4().hex}.part"
+        name = uuid.uuid4().hex
+        self._part = storage._tmp / f"{name}.part"
+        # Locked before it is named `.part`, so that a sweep never finds it unlocked while alive.
+        creating = storage._tmp / f"{name}.creating"
         try:
-            self._file: BinaryIO | None = self._part.open("xb")
+            file = creating.open("xb")
         except OSError as err:
             raise _os_error(err, f"cannot create {self._part}") from err
+        try:
+            fcntl.flock(file.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            os.replace(creating, self._part)
+        except OSError as err:
+            file.close()
+            creating.unlink(missing_ok=True)
+            raise _os_error(err, f"cannot create {self._part}") from err
+        self._file: BinaryIO | None = file
 
     def write(self, data: bytes) -> None:
         if self._file is None:
@@ -198,9 +216,10 @@ class _LocalUpload:
             file.flush()
             # Durable before visible: a crash after the run is recorded must not lose the bytes.
             os.fsync(file.fileno())
-            file.close()
             self._final.parent.mkdir(parents=True, exist_ok=True)
+            # Renamed while still open (so still locked): a sweep never sees it unlocked.
             os.replace(self._part, self._final)
+            file.close()
             _fsync_dir(self._final.parent)
         except OSError as err:
             file.close()
@@ -213,6 +232,18 @@ class _LocalUpload:
             with contextlib.suppress(OSError):
                 file.close()
         self._part.unlink(missing_ok=True)
+
+
+def _locked(path: Path) -> bool:
+    """Whether a process holds the lock on `path` (a `_LocalUpload` being written)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)  # closing drops the lock this probe may have taken
+    return False
 
 
 def _fsync_dir(path: Path) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import shlex
 import signal
 import threading
 from collections.abc import Callable, Iterator
@@ -15,10 +16,10 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from service.cli import DataDirOption, settings_for
+from service.cli import DataDirOption, settings_for, startup_errors
 
 if TYPE_CHECKING:
-    from service.db import Database
+    from service.settings import Settings
 
 DEFAULT_GRACE_S = 30.0
 DEFAULT_RUN_TIMEOUT_S = 3600.0
@@ -79,13 +80,14 @@ def worker(
     Point it at the shared database and storage with FLEETCAL_DATABASE_URL and
     FLEETCAL_STORAGE_URL; run any number of workers on any number of machines.
     """
-    from service.db import Database
+    from service.startup import open_database, open_storage
     from workers.worker import CALIBRATE_JOB, Worker, WorkerOptions
 
     configure_logging(log_level)
     settings = settings_for(data_dir)
-    db = Database.from_settings(settings)
-    _prepare_database(db, migrate=settings.migrate_on_start)
+    with startup_errors():
+        db = open_database(settings, migrate=settings.migrate_on_start)
+        open_storage(settings)
     options = WorkerOptions(
         concurrency=concurrency or default_concurrency(),
         shutdown_grace=timedelta(seconds=shutdown_grace),
@@ -121,33 +123,52 @@ def serve(
     SQLite and local storage under --data-dir by default: nothing else to start. The first start
     prints an admin key, once.
     """
-    from service.db import Database
-    from workers.embedded import EmbeddedService, bootstrap_admin_key
+    from service.startup import shown_database
+    from workers.embedded import EmbeddedService, first_admin_key
     from workers.worker import WorkerOptions
 
     configure_logging(log_level)
     settings = settings_for(data_dir)
-    db = Database.from_settings(settings)
-    _prepare_database(db, migrate=settings.migrate_on_start)
-    secret = bootstrap_admin_key(db)
-    db.dispose()
-    if secret is not None:
-        typer.echo("Created the first admin key; it is shown only this once, store it now:")
-        typer.echo(f"  {secret}")
-        typer.echo("Make keys for robots and dashboards with it (or `fleetcal keys create`).")
     stop = threading.Event()
     options = WorkerOptions(shutdown_grace=timedelta(seconds=shutdown_grace))
     service = EmbeddedService(
         settings, host=host, port=port, workers=workers, options=options, access_log=access_log
     )
+    with startup_errors():
+        service.prepare()
     # Signals first: a SIGTERM while the service starts must stop it cleanly too.
     with stop_signals(lambda now=False: stop.set()), service:
         typer.echo(
             f"fleetcal API at {service.url} (docs: {service.url}/docs), {workers} worker "
-            f"process(es), database {_redacted(settings.resolved_database_url)}; Ctrl-C stops"
+            f"process(es), database {shown_database(settings)}; Ctrl-C stops"
         )
+        # Only now, with the API answering: a start that fails must not use up the key's showing.
+        print_first_admin_key(first_admin_key(settings), settings)
         stop.wait()
         typer.echo("stopping: running runs finish or go back to the queue")
+
+
+def print_first_admin_key(secret: str | None, settings: Settings) -> None:
+    """Show the admin key a first start created (None: keys existed), with how to make more."""
+    if secret is None:
+        return
+    typer.echo("Created the first admin key; it is shown only this once, store it now:")
+    typer.echo(f"  {secret}")
+    typer.echo(
+        f"Make keys for robots and dashboards with it, or with `{keys_create_hint(settings)}`."
+    )
+
+
+def keys_create_hint(settings: Settings, scope: str = "read") -> str:
+    return f"fleetcal keys create --scope {scope} {data_dir_flag(settings)}".rstrip()
+
+
+def data_dir_flag(settings: Settings) -> str:
+    """`--data-dir DIR` for the hints this process prints: the directory it uses (nothing when
+    `FLEETCAL_DATABASE_URL` names the database: the commands read it from there too)."""
+    if settings.database_url is not None:
+        return ""
+    return f"--data-dir {shlex.quote(str(settings.data_dir))}"
 
 
 def configure_logging(level: str) -> None:
@@ -179,21 +200,3 @@ def stop_signals(request_stop: Callable[..., None]) -> Iterator[None]:
     finally:
         for signum, handler in saved.items():
             signal.signal(signum, handler)
-
-
-def _prepare_database(db: Database, *, migrate: bool) -> None:
-    if migrate:
-        db.upgrade()
-    elif not db.migrations_current():
-        typer.echo(
-            "error: the database schema is not current; run `fleetcal db upgrade` (or the "
-            "image's `migrate` entrypoint) first",
-            err=True,
-        )
-        raise typer.Exit(2)
-
-
-def _redacted(url: str) -> str:
-    from sqlalchemy import make_url
-
-    return make_url(url).render_as_string(hide_password=True)

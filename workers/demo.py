@@ -17,12 +17,14 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from service.cli import DataDirOption, settings_for
+from service.cli import DataDirOption, settings_for, startup_errors
+from service.startup import where_state_lives
 
 if TYPE_CHECKING:
     import httpx
 
     from pipeline.synth import Truth
+    from service.settings import Settings
 
 ROBOT_ID = "demo-1"
 DEMO_SCENARIO = "set1-box"
@@ -52,31 +54,25 @@ def demo(
     seed: Annotated[int, typer.Option("--seed")] = 0,
 ) -> None:
     """Run the main job end to end: embedded service, synthetic recording, upload, verdict."""
-    from service.auth import create_key
-    from service.db import Database
-    from service.models import Scope
-    from workers.commands import configure_logging, stop_signals
-    from workers.embedded import EmbeddedService, bootstrap_admin_key
+    from workers.commands import configure_logging, print_first_admin_key, stop_signals
+    from workers.embedded import EmbeddedService, first_admin_key
 
     started = time.monotonic()
     configure_logging("warning")
     settings = settings_for(data_dir)
-    db = Database.from_settings(settings)
-    db.upgrade()
-    admin_key = bootstrap_admin_key(db)
-    with db.transaction() as session:
-        robot_key = create_key(session, [Scope.UPLOAD], robot_id=ROBOT_ID, name="fleetcal demo")
-    db.dispose()
-
     service = EmbeddedService(settings, host=host, port=_free_or_any(host, port), workers=1)
+    with startup_errors():
+        service.prepare(migrate=True)
     with service:
-        _step(1, f"service   {service.url} (database and storage under {settings.data_dir})")
+        _step(1, f"service   {service.url} ({where_state_lives(settings)})")
+        print_first_admin_key(first_admin_key(settings), settings)
+        robot_key = _robot_key(settings)
         with tempfile.TemporaryDirectory(prefix="fleetcal-demo-") as scratch:
             truth, archive = _synthesise(Path(scratch), scenario, seed, rate_scale)
             import httpx
 
             client = httpx.Client(
-                base_url=service.url, headers={"X-API-Key": robot_key.secret}, timeout=60
+                base_url=service.url, headers={"X-API-Key": robot_key}, timeout=60
             )
             with client:
                 run_id = _upload(client, archive)
@@ -85,10 +81,25 @@ def demo(
         typer.echo(f"demo took {time.monotonic() - started:.0f} s")
         if once:
             raise typer.Exit(0 if passed else 1)
-        _serve_on(service.url, run_id, admin_key, robot_key.secret)
+        _serve_on(service.url, run_id, robot_key, settings)
         stop = threading.Event()
         with stop_signals(lambda now=False: stop.set()):
             stop.wait()
+
+
+def _robot_key(settings: Settings) -> str:
+    """A new upload key for the demo's robot (each demo run makes its own)."""
+    from service.auth import create_key
+    from service.db import Database
+    from service.models import Scope
+
+    db = Database.from_settings(settings)
+    try:
+        with db.transaction() as session:
+            key = create_key(session, [Scope.UPLOAD], robot_id=ROBOT_ID, name="fleetcal demo")
+    finally:
+        db.dispose()
+    return key.secret
 
 
 def _step(number: int, text: str) -> None:
@@ -236,20 +247,20 @@ def extrinsics_table(result: dict[str, Any], truth: Truth) -> list[str]:
     return lines
 
 
-def _serve_on(url: str, run_id: str, admin_key: str | None, robot_key: str) -> None:
+def _serve_on(url: str, run_id: str, robot_key: str, settings: Settings) -> None:
+    from workers.commands import keys_create_hint
+
     typer.echo("")
     typer.echo(f"The service keeps running at {url} (API docs: {url}/docs); Ctrl-C stops it.")
     typer.echo(
-        f"  the dashboard:    {url}/#/runs/{run_id} (sign in with the admin key, or a key from "
-        "`fleetcal keys create --scope read`)"
+        f"  the dashboard:    {url}/#/runs/{run_id} (sign in with the admin key printed on the "
+        f"first start, or a key from `{keys_create_hint(settings)}`)"
     )
     typer.echo(f"  the run:          curl -H 'X-API-Key: {robot_key}' {url}/v1/runs/{run_id}")
     typer.echo(
         f"  the calibration:  curl -H 'X-API-Key: {robot_key}' "
         f"{url}/v1/robots/{ROBOT_ID}/calibration"
     )
-    if admin_key is not None:
-        typer.echo(f"  admin key (shown once, store it): {admin_key}")
 
 
 def _mm(value: float | None) -> str:

@@ -8,6 +8,7 @@ main thread keeps Ctrl-C and SIGTERM and decides when everything stops.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import logging
 import socket
 import threading
@@ -23,6 +24,7 @@ from service.db import Database
 from service.models import ApiKey, Scope
 from service.server import http_protocol
 from service.settings import Settings
+from service.startup import StartupError, open_database, open_storage
 from workers.worker import Worker, WorkerOptions
 
 log = logging.getLogger(__name__)
@@ -41,6 +43,15 @@ def bootstrap_admin_key(db: Database) -> str | None:
             return None
         key = create_key(session, [Scope.ADMIN], name="first admin (created by fleetcal serve)")
     return key.secret
+
+
+def first_admin_key(settings: Settings) -> str | None:
+    """`bootstrap_admin_key` on the settings' database."""
+    db = Database.from_settings(settings)
+    try:
+        return bootstrap_admin_key(db)
+    finally:
+        db.dispose()
 
 
 class EmbeddedService:
@@ -74,9 +85,27 @@ class EmbeddedService:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}"
 
+    def prepare(self, *, migrate: bool | None = None) -> None:
+        """Check everything the start needs, so that it fails before anything is created: the
+        port is bound (first: a busy port must not leave a new database behind), the database
+        answers and is migrated (`migrate`, default the settings' `migrate_on_start`), and the
+        storage takes writes. Raises `StartupError`."""
+        if self._socket is not None:
+            return
+        migrate = self.settings.migrate_on_start if migrate is None else migrate
+        sock = _bind(self.host, self.port)
+        try:
+            open_database(self.settings, migrate=migrate).dispose()
+            open_storage(self.settings)
+        except BaseException:
+            sock.close()
+            raise
+        self._socket = sock
+        self.port = sock.getsockname()[1]
+
     def __enter__(self) -> EmbeddedService:
-        self._socket = _bind(self.host, self.port)
-        self.port = self._socket.getsockname()[1]
+        self.prepare()
+        assert self._socket is not None
         config = uvicorn.Config(
             create_app(self.settings),
             log_level="warning",
@@ -130,15 +159,25 @@ class EmbeddedService:
             self._socket.close()
 
 
+_BIND_HINTS = {
+    errno.EADDRINUSE: "another process listens there: stop it or choose a free port with --port",
+    errno.EADDRNOTAVAIL: "this machine has no such address: choose another --host",
+    errno.EACCES: "ports below 1024 need privileges: choose --port 1024 or above",
+}
+
+
 def _bind(host: str, port: int) -> socket.socket:
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         sock.bind((host, port))
-    except OSError:
+    except (OSError, OverflowError) as err:
         sock.close()
-        raise
+        code = err.errno if isinstance(err, OSError) else None
+        reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+        hint = _BIND_HINTS.get(code or 0, "check --host and --port")
+        raise StartupError(f"cannot listen on {host}:{port}: {reason}; {hint}") from None
     sock.listen(128)
     sock.set_inheritable(True)
     return sock

@@ -9,6 +9,7 @@ is imported once per worker, not once per child); the worker's parent never does
 from __future__ import annotations
 
 import logging
+import re
 import tempfile
 import time
 from functools import cache
@@ -17,7 +18,7 @@ from typing import Any
 
 from pipeline.calibrate import STAGES, CalibrationResult, calibrate
 from pipeline.config import PipelineConfig, config_from_mapping
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, PipelineError
 from pipeline.io import read_recording
 from pipeline.problem import CalibrationProblem
 from pipeline.report import render_report
@@ -100,6 +101,19 @@ def pipeline_config_for(
     return config_from_mapping(data)
 
 
+_SCRATCH = re.compile(re.escape(tempfile.gettempdir()) + r"/fleetcal-[\w-]+/(unpacked/)?")
+"""A folder of this worker's (the run's, or the reader's for an unpacked archive)."""
+
+
+def without_scratch_paths(err: PipelineError, recording: Path) -> PipelineError:
+    """`err`, its message rid of the worker's temporary paths: the user uploaded a recording,
+    not `/tmp/fleetcal-run-x/recording.tar`, and a path inside an archive reads from the archive's
+    own root. The same exception (type and traceback), for the retry policy."""
+    message = str(err).replace(str(recording), "the uploaded recording")
+    err.args = (_SCRATCH.sub("", message),)
+    return err
+
+
 def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
     """Download, read and calibrate the run's recording; the `result.json` document."""
 
@@ -134,7 +148,10 @@ def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
 
         stage("read")
         started = time.perf_counter()
-        problem = read_recording(path, config.reader)
+        try:
+            problem = read_recording(path, config.reader)
+        except PipelineError as err:
+            raise without_scratch_paths(err, path) from err.__cause__
         read_seconds = time.perf_counter() - started
 
     stage(STAGES[0])

@@ -256,7 +256,10 @@ class Worker:
             self._store(held, message.result, time.monotonic() - slot.started)
         elif isinstance(message, Failed):
             pool.finish(slot)
-            log.info("run %s: attempt failed: %s", held.run_id, message.traceback.strip())
+            if message.failure.kind != FailureKind.BAD_INPUT:
+                # A bad recording is the user's to fix and its message says how (logged once, in
+                # `_end_attempt`); any other failure may be ours, and its traceback shows where.
+                log.info("run %s: attempt failed: %s", held.run_id, message.traceback.strip())
             self._end_attempt(held, message.failure)
         return False
 
@@ -329,7 +332,10 @@ class Worker:
             else:
                 assert decision.problem is not None
                 queue.fail(self.db, held, decision.problem)
-                log.error("run %s: failed: %s", held.run_id, decision.problem["detail"])
+                if failure.kind == FailureKind.BAD_INPUT:
+                    log.info("run %s: failed on bad input: %s", held.run_id, failure.message)
+                else:
+                    log.error("run %s: failed: %s", held.run_id, decision.problem["detail"])
         except (repository.LeaseLostError, repository.RunFinishedError) as err:
             log.warning("run %s: outcome dropped: %s", held.run_id, err)
         except SQLAlchemyError as err:

@@ -15,6 +15,7 @@ from pipeline.cli.common import (
     EXIT_FAILED_VERDICT,
     EXIT_OK,
     RecordingPath,
+    check_writable,
     progress,
     user_errors,
 )
@@ -46,6 +47,7 @@ def calibrate_command(
     from pipeline.result import dumps
 
     with user_errors():
+        check_writable(output)
         config = _config(config_path, reference)
         started = time.perf_counter()
         problem = read_recording(path, config.reader)

@@ -40,6 +40,26 @@ def user_errors() -> Iterator[None]:
         raise typer.Exit(EXIT_BAD_INPUT) from None
 
 
+def check_writable(path: Path) -> None:
+    """Raise `BadInputError` unless a file can be written at `path`, before any work is done:
+    a long run must not end in "cannot write". An existing file is opened without truncating
+    it; a new one is created and removed again."""
+    if path.is_dir():
+        raise BadInputError(
+            f"cannot write {path}: it is a directory; name a file, e.g. {path / 'result.json'}"
+        )
+    existed = path.exists()
+    try:
+        with path.open("r+b" if existed else "xb"):
+            pass
+    except OSError as err:
+        raise BadInputError(
+            f"cannot write {path}: {err.strerror or err}; choose a writable path"
+        ) from None
+    if not existed:
+        path.unlink()
+
+
 def progress(message: str) -> None:
     """One progress line on stderr (stdout stays clean for `--json` output)."""
     print(message, file=sys.stderr, flush=True)

@@ -15,12 +15,16 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.synth.floor import SINK_M
+from pipeline.synth.objects import ObjectRole, SceneObject
 from pipeline.synth.scene import Scene
 
 _SUB_RAYS = 6
 # Surfaces closer than this along the ray are one return (a box corner, not an edge in front
 # of the floor); only a larger spread mixes.
 _MIN_GAP_M = 0.1
+_FAR_M = 1e6
+_STRUCTURES = (ObjectRole.WALL, ObjectRole.SHELF)
 
 
 @dataclass(frozen=True)
@@ -37,7 +41,8 @@ def cast(
     scene: Scene, origins: NDArray[np.float64], directions: NDArray[np.float64], max_range: float
 ) -> Hits:
     """Cast (N, 3) unit `directions` (world frame) from `origins` ((3,), or (N, 3) per ray),
-    ignoring the robot body. Rays in a run with the same origin go to MuJoCo in one batch."""
+    ignoring the robot body. Rays in a run with the same origin go to MuJoCo in one batch; an
+    analytic floor is hit by `FloorSurface.intersect` and the nearer hit wins."""
     n = len(directions)
     origins = np.broadcast_to(np.asarray(origins, dtype=np.float64), (n, 3))
     geom = np.empty(n, dtype=np.int32)
@@ -54,7 +59,7 @@ def cast(
                 scene.data,
                 np.ascontiguousarray(origins[start]),
                 flat[start:end].reshape(-1),
-                None,
+                scene.ray_groups,
                 1,
                 scene.robot_body_id,
                 geom[start:end],
@@ -64,6 +69,13 @@ def cast(
                 float(max_range),
             )
     hit = (geom >= 0) & (dist >= 0) & (dist <= max_range)
+    if scene.floor is not None:
+        floor_range, floor_normal = scene.floor.intersect(origins, directions, max_range)
+        on_floor = floor_range < np.where(hit, dist, np.inf)
+        dist = np.where(on_floor, floor_range, dist)
+        geom = np.where(on_floor, scene.object_geom[-1], geom).astype(np.int32)
+        normal = np.where(on_floor[:, None], floor_normal, normal)
+        hit |= on_floor
     cos_incidence = np.abs(np.einsum("ij,ij->i", normal, directions))
     return Hits(
         range_m=np.where(hit, dist, np.inf),
@@ -149,13 +161,22 @@ def _near_objects(
     range_m: NDArray[np.float64],
     footprint: float,
 ) -> NDArray[np.bool_]:
-    """Rays whose footprint may touch an object: the beam's path up to just past its centre hit
-    passes within the object's bounding sphere (widened by the footprint's spread). A ray that
-    reaches the floor before an object cannot straddle that object's edge."""
-    if not scene.objects:
-        return np.zeros(len(directions), dtype=bool)
-    centres = np.array([obj.T_world_object[:3, 3] for obj in scene.objects])
-    radius = np.array([obj.bounding_radius for obj in scene.objects])
+    """Rays whose footprint may touch an object's edge. For objects and walkers: the beam's path
+    up to just past its centre hit passes within the object's bounding sphere (widened by the
+    footprint's spread). For a room's walls and shelves, whose spheres would take in nearly every
+    ray: the footprint covers part of the box but not all of it. A ray that reaches the floor
+    before an object cannot straddle that object's edge."""
+    surfaces = scene.surfaces
+    near = np.zeros(len(directions), dtype=bool)
+    reach = np.minimum(range_m + _MIN_GAP_M, _FAR_M)
+    boxes = [obj for obj in surfaces if obj.role in _STRUCTURES]
+    if boxes:
+        near = _straddle_boxes(boxes, origins, directions, reach, reach * math.tan(footprint))
+    compact = [obj for obj in surfaces if obj.role not in _STRUCTURES]
+    if not compact:
+        return near
+    centres = np.array([obj.T_world_object[:3, 3] for obj in compact])
+    radius = np.array([obj.bounding_radius for obj in compact])
     # Per ray and object: distance along the ray to the centre's foot, and |centre - origin|^2.
     along = directions @ centres.T - np.einsum("ij,ij->i", directions, origins)[:, None]
     to_centre_sq = (
@@ -163,11 +184,58 @@ def _near_objects(
         - 2.0 * origins @ centres.T
         + np.einsum("ij,ij->i", origins, origins)[:, None]
     )
-    reach = np.minimum(range_m + _MIN_GAP_M, np.finfo(np.float64).max)[:, None]
-    closest = np.clip(along, 0.0, reach)
+    reach_sphere = np.minimum(range_m + _MIN_GAP_M, np.finfo(np.float64).max)[:, None]
+    closest = np.clip(along, 0.0, reach_sphere)
     distance_sq = to_centre_sq - 2.0 * closest * along + closest**2
     limit = radius + closest * math.tan(footprint)
-    return np.asarray(np.any(distance_sq <= limit**2, axis=1))
+    return np.asarray(near | np.any(distance_sq <= limit**2, axis=1))
+
+
+def _straddle_boxes(
+    boxes: list[SceneObject],
+    origins: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    reach: NDArray[np.float64],
+    spread: NDArray[np.float64],
+) -> NDArray[np.bool_]:
+    """Rays (N,) whose cylinder of radius `spread` (N,), up to `reach` (N,), meets one of the
+    boxes but is not wholly inside it: the ray passes through the box grown by `spread` and
+    not through the box shrunk by it (its foot shrunk by `SINK_M` more, where it stands in an
+    uneven floor). The cylinder holds every sub-ray of the footprint up to `reach`."""
+    R = np.array([box.T_world_object[:3, :3] for box in boxes])  # (B, 3, 3)
+    centres = np.array([box.T_world_object[:3, 3] for box in boxes])
+    half = 0.5 * np.array(
+        [[b.dimensions["x"], b.dimensions["y"], b.dimensions["z"]] for b in boxes]
+    )
+    # Rays in each box's frame, (N, B, 3); per axis below, so every reduction is elementwise.
+    stacked = R.transpose(1, 0, 2).reshape(3, -1)  # p @ stacked: p in every box's axes
+    n, b = len(origins), len(boxes)
+    o = (origins @ stacked).reshape(n, b, 3) - np.einsum("bj,bjk->bk", centres, R)[None]
+    d = (directions @ stacked).reshape(n, b, 3)
+    d = np.where(np.abs(d) < 1e-12, 1e-12, d)
+    grow = spread[:, None]
+    reach_b = reach[:, None]
+
+    def passes(
+        shrink_low: NDArray[np.float64], shrink_high: NDArray[np.float64]
+    ) -> NDArray[np.bool_]:
+        t_in = np.zeros(o.shape[:2])
+        t_out = np.broadcast_to(reach_b, o.shape[:2]).copy()
+        solid = np.ones(o.shape[:2], dtype=bool)
+        for axis in range(3):
+            low = -half[None, :, axis] + shrink_low[..., axis]
+            high = half[None, :, axis] - shrink_high[..., axis]
+            t1 = (low - o[..., axis]) / d[..., axis]
+            t2 = (high - o[..., axis]) / d[..., axis]
+            t_in = np.maximum(t_in, np.minimum(t1, t2))
+            t_out = np.minimum(t_out, np.maximum(t1, t2))
+            solid &= low < high
+        return np.asarray(solid & (t_in <= t_out))
+
+    grown = np.broadcast_to(-grow[..., None], (*o.shape[:2], 3))
+    shrunk = np.broadcast_to(grow[..., None], (*o.shape[:2], 3))
+    foot = shrunk + np.array([0.0, 0.0, SINK_M])
+    return np.asarray(np.any(passes(grown, grown) & ~passes(foot, shrunk), axis=1))
 
 
 def _footprint_rays(directions: NDArray[np.float64], footprint: float) -> NDArray[np.float64]:

@@ -19,6 +19,7 @@ from pipeline.synth.lidar_models import LidarModel, Mid70, SpinningLidar
 from pipeline.synth.motion import ArcMotion, Motion
 from pipeline.synth.perturbation import PerturbationBounds, PlanarDrift
 from pipeline.synth.scene import ObjectKind, Ring, SceneSpec
+from pipeline.synth.world_scenarios import world_scenarios
 from pipeline.transforms import Matrix4, from_xyz_rpy
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
@@ -231,6 +232,7 @@ def _registry() -> dict[str, ScenarioSpec]:
             }
         )
     )
+    specs += world_scenarios(_set1(kinds, "set1-mixed", ""))
     tiny_mid70 = Mid70(max_range_m=12.0)
     specs.append(
         ScenarioSpec(

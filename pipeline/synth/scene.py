@@ -2,14 +2,15 @@
 
 Objects stand on the floor in rings around the robot's path, spread evenly in angle (one random
 angle per sector) so that every LiDAR sees some from almost every stop, and never inside the
-band the robot's footprint sweeps.
+band the robot's footprint sweeps. Options compose further worlds: a closed room (`room.py`),
+people or carts walking through (`walkers.py`), an uneven floor (`floor.py`) and dust (`dust.py`);
+left unset, a scene is exactly what it was before they existed.
 """
 
 from __future__ import annotations
 
-import enum
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import mujoco
@@ -19,18 +20,32 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import ConfigError
-from pipeline.transforms import Matrix4, from_xyz_rpy, make_transform, to_translation_xyzw
+from pipeline.synth.dust import DustSpec
+from pipeline.synth.floor import FloorSpec, FloorSurface
+from pipeline.synth.objects import ObjectKind, ObjectRole, SceneObject
+from pipeline.synth.room import RoomSpec
+from pipeline.synth.walkers import Walker, WalkersSpec
+from pipeline.transforms import (
+    Matrix4,
+    from_xyz_rpy,
+    invert,
+    make_transform,
+    to_translation_xyzw,
+)
+
+__all__ = ["ObjectKind", "ObjectRole", "Ring", "Scene", "SceneObject", "SceneSpec"]
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
 _PLACEMENT_TRIES = 200
 ROBOT_BODY = "robot"
 FLOOR_GEOM = "floor"
-
-
-class ObjectKind(enum.StrEnum):
-    BOX = "box"
-    CYLINDER = "cylinder"
-    CAPSULE = "capsule"
+# MuJoCo geom group of a plane that stands for an analytic floor: rays skip it.
+_ANALYTIC_GROUP = 3
+NOT_STATIC = -2
+"""`Scene.geom_object` of a walker's geom, and the labels' `object_index` of a point on a walker
+or on dust: on no static surface."""
+FreeFn = Callable[[NDArray[np.float64], float], bool]
+"""`(xy (2,), radius) -> whether a circle there keeps clear of the world's other structures`."""
 
 
 class Ring(BaseModel):
@@ -97,70 +112,19 @@ class SceneSpec(BaseModel):
     floor_reflectivity: float = Field(default=0.15, gt=0, le=1)
     object_reflectivity: tuple[float, float] = (0.4, 0.8)
     robot_size_m: tuple[float, float, float] = (0.7, 0.5, 0.45)
+    room: RoomSpec | None = Field(default=None, description="walls, doorways and shelves")
+    walkers: WalkersSpec | None = Field(default=None, description="people or carts walking by")
+    floor: FloorSpec | None = Field(default=None, description="an uneven floor; None: z = 0")
+    dust: DustSpec | None = Field(default=None, description="spurious returns near the sensor")
 
-
-@dataclass(frozen=True)
-class SceneObject:
-    """One object. Its frame has its origin at the centroid and z up.
-
-    `dimensions`: box `x`, `y`, `z` (full sides); cylinder `radius`, `height`; capsule `radius`,
-    `length` (straight part, lying along the object's x; total height `2 * radius`).
-    """
-
-    kind: ObjectKind
-    dimensions: Mapping[str, float]
-    T_world_object: Matrix4
-    reflectivity: float
-
-    @property
-    def radius_xy(self) -> float:
-        """Radius of the circle round its footprint on the floor."""
-        d = self.dimensions
-        if self.kind is ObjectKind.BOX:
-            return 0.5 * math.hypot(d["x"], d["y"])
-        if self.kind is ObjectKind.CYLINDER:
-            return d["radius"]
-        return 0.5 * d["length"] + d["radius"]
-
-    @property
-    def bounding_radius(self) -> float:
-        """Radius of a sphere round the centroid that holds the whole object."""
-        d = self.dimensions
-        if self.kind is ObjectKind.BOX:
-            return 0.5 * math.sqrt(d["x"] ** 2 + d["y"] ** 2 + d["z"] ** 2)
-        if self.kind is ObjectKind.CYLINDER:
-            return math.hypot(d["radius"], 0.5 * d["height"])
-        return 0.5 * d["length"] + d["radius"]
-
-    def distance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Unsigned distance (N,) from world `points` (N, 3) to the object's surface."""
-        local = (points - self.T_world_object[:3, 3]) @ self.T_world_object[:3, :3]
-        d = self.dimensions
-        if self.kind is ObjectKind.BOX:
-            excess = np.abs(local) - 0.5 * np.array([d["x"], d["y"], d["z"]])
-        elif self.kind is ObjectKind.CYLINDER:
-            excess = np.column_stack(
-                [
-                    np.hypot(local[:, 0], local[:, 1]) - d["radius"],
-                    np.abs(local[:, 2]) - 0.5 * d["height"],
-                ]
-            )
-        else:
-            axis = np.clip(local[:, 0], -0.5 * d["length"], 0.5 * d["length"])
-            offset = local - np.column_stack([axis, np.zeros_like(axis), np.zeros_like(axis)])
-            return np.asarray(np.abs(np.linalg.norm(offset, axis=1) - d["radius"]))
-        outside = np.linalg.norm(np.maximum(excess, 0.0), axis=1)
-        inside = np.all(excess <= 0.0, axis=1)
-        return np.asarray(np.where(inside, -np.max(excess, axis=1), outside), dtype=np.float64)
-
-    def to_json(self) -> dict[str, object]:
-        translation, quat = to_translation_xyzw(self.T_world_object)
-        return {
-            "kind": self.kind.value,
-            "dimensions": dict(self.dimensions),
-            "pose": {"translation": translation.tolist(), "rotation_xyzw": quat.tolist()},
-            "reflectivity": self.reflectivity,
-        }
+    def robot_band(self, keep_out: tuple[float, float]) -> tuple[float, float]:
+        """Inner and outer radius of the ring the robot's footprint sweeps (with its clearance)
+        when its centre stays between the radii `keep_out`."""
+        robot_radius = 0.5 * math.hypot(self.robot_size_m[0], self.robot_size_m[1])
+        return (
+            keep_out[0] - robot_radius - self.robot_clearance_m,
+            keep_out[1] + robot_radius + self.robot_clearance_m,
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,8 +132,11 @@ class Scene:
     """A built MuJoCo model and what each geom is.
 
     `geom_object[g]`: index into `objects` of geom `g`, -1 for the floor (and the robot, whose
-    body the rays exclude). `object_geom[k]`: geom of object `k`, and of the floor at `k = -1`
-    (the last entry), so it inverts `geom_object`. `geom_reflectivity[g]`: in (0, 1].
+    body the rays exclude), `NOT_STATIC` for a walker's. `geom_walker[g]`: index into `walkers`, -1
+    for every other geom. `object_geom[k]`: geom of surface `k` (the objects, then the walkers,
+    as `surfaces` lists them) and of the floor at `k = -1` (the last entry), so it inverts
+    `nearest_surface`. `geom_reflectivity[g]`: in (0, 1]. `floor`: the analytic floor the rays
+    hit instead of the plane `z = 0`, or None. `ray_groups`: the geom groups rays see (None: all).
     """
 
     model: mujoco.MjModel
@@ -179,16 +146,37 @@ class Scene:
     geom_object: NDArray[np.int32]
     object_geom: NDArray[np.int32]
     geom_reflectivity: NDArray[np.float64]
+    floor: FloorSurface | None = None
+    walkers: tuple[Walker, ...] = ()
+    geom_walker: NDArray[np.int32] = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
+    ray_groups: NDArray[np.uint8] | None = None
     _placed_rotation: NDArray[np.float64] = field(default_factory=lambda: np.full((3, 3), np.nan))
+    _walkers_now: list[SceneObject] = field(default_factory=list)
+    _walkers_time: list[float] = field(default_factory=lambda: [math.nan])
+
+    @property
+    def surfaces(self) -> tuple[SceneObject, ...]:
+        """Every solid surface but the floor, where it is now: the objects, then the walkers."""
+        return (*self.objects, *self._walkers_now)
+
+    def floor_height(self, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Floor height (N,) at world `xy` (N, 2)."""
+        if self.floor is None:
+            return np.zeros(len(xy))
+        return self.floor.height(xy)
 
     def nearest_surface(
         self, points: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.int16]]:
-        """For world `points` (N, 3): distance (N,) to the nearest surface (floor or object) and
-        that surface's object index (N,), -1 for the floor. Analytic, independent of MuJoCo."""
-        distance = np.abs(points[:, 2])
+        """For world `points` (N, 3): distance (N,) to the nearest surface (floor or one of
+        `surfaces`) and that surface's index (N,) into `surfaces`, -1 for the floor. Analytic,
+        independent of MuJoCo (the floor's distance is the height above it)."""
+        if self.floor is None:
+            distance = np.abs(points[:, 2])
+        else:
+            distance = np.abs(points[:, 2] - self.floor.height(points[:, :2]))
         nearest = np.full(len(points), -1, dtype=np.int16)
-        for index, obj in enumerate(self.objects):
+        for index, obj in enumerate(self.surfaces):
             # Only points that could beat the current best need the exact distance.
             to_centre = np.linalg.norm(points - obj.T_world_object[:3, 3], axis=1)
             rows = np.flatnonzero(to_centre - obj.bounding_radius < distance)
@@ -214,22 +202,43 @@ class Scene:
         # Ray casting reads geom poses from the data; without a forward pass every ray misses.
         mujoco.mj_forward(self.model, self.data)
 
+    def place_walkers(self, t: float) -> None:
+        """Move every walker to where it is at time `t` (seconds since the recording started)."""
+        if not self.walkers or self._walkers_time[0] == t:
+            return
+        self._walkers_now[:] = [
+            walker.at(t, float(self.floor_height(walker.positions(np.array([t]))[0])[0]))
+            for walker in self.walkers
+        ]
+        for index, now in enumerate(self._walkers_now):
+            mocap = self.model.body_mocapid[self.model.body(_walker_body(index)).id]
+            self.data.mocap_pos[mocap] = now.T_world_object[:3, 3]
+            mujoco.mju_mat2Quat(
+                self.data.mocap_quat[mocap],
+                np.ascontiguousarray(now.T_world_object[:3, :3]).ravel(),
+            )
+        self._walkers_time[0] = t
+        mujoco.mj_forward(self.model, self.data)
+
 
 def place_objects(
-    spec: SceneSpec, rng: np.random.Generator, keep_out: tuple[float, float]
+    spec: SceneSpec,
+    rng: np.random.Generator,
+    keep_out: tuple[float, float],
+    free: FreeFn | None = None,
 ) -> tuple[SceneObject, ...]:
-    """Draw the objects. `keep_out`: inner and outer radius of the robot centre's path."""
-    robot_radius = 0.5 * math.hypot(spec.robot_size_m[0], spec.robot_size_m[1])
-    band = (
-        keep_out[0] - robot_radius - spec.robot_clearance_m,
-        keep_out[1] + robot_radius + spec.robot_clearance_m,
-    )
+    """Draw the objects. `keep_out`: inner and outer radius of the robot centre's path; `free`:
+    whether a footprint circle keeps clear of the room and the walkers' ways (None: no such).
+    A ring's sector that a wall, shelf or walkway leaves no room in stays empty."""
+    band = spec.robot_band(keep_out)
     placed: list[SceneObject] = [obj.to_object() for obj in spec.objects]
     for ring in spec.rings:
         count = int(rng.integers(ring.count[0], ring.count[1] + 1))
         offset = rng.random() * 2.0 * math.pi
         for sector in range(count):
-            placed.append(_place_one(spec, rng, ring, band, placed, offset, sector, count))
+            obj = _place_one(spec, rng, ring, band, placed, offset, sector, count, free)
+            if obj is not None:
+                placed.append(obj)
     return tuple(placed)
 
 
@@ -242,7 +251,11 @@ def _place_one(
     offset: float,
     sector: int,
     count: int,
-) -> SceneObject:
+    free: FreeFn | None,
+) -> SceneObject | None:
+    """One object in its sector; None where the sector's only free floor is taken by the room
+    or a walkway (objects are not put where people walk), an error where it is too crowded."""
+    blocked = False
     for _ in range(_PLACEMENT_TRIES):
         candidate = _draw_object(spec, rng)
         angle = offset + 2.0 * math.pi * (sector + rng.uniform(0.1, 0.9)) / count
@@ -257,9 +270,14 @@ def _place_one(
             for other in placed
         ):
             continue
+        if free is not None and not free(xy, r_xy + spec.object_gap_m):
+            blocked = True
+            continue
         T = candidate.T_world_object.copy()
         T[:2, 3] = xy
         return SceneObject(candidate.kind, candidate.dimensions, T, candidate.reflectivity)
+    if blocked:
+        return None
     raise ConfigError(
         f"could not place {count} objects in the ring {ring.r_min_m}-{ring.r_max_m} m without "
         "overlaps or touching the robot's path; widen the ring or lower its object count"
@@ -289,11 +307,17 @@ def build_scene(
     spec: SceneSpec,
     objects: Sequence[SceneObject],
     lidar_mounts: Mapping[str, Matrix4] | None = None,
+    *,
+    floor: FloorSurface | None = None,
+    walkers: Sequence[Walker] = (),
 ) -> Scene:
-    """The MuJoCo model of the floor, `objects` and the robot (with a site per LiDAR mount)."""
+    """The MuJoCo model of the floor, `objects`, `walkers` (mocap bodies, placed by
+    `Scene.place_walkers`) and the robot (with a site per LiDAR mount). With an analytic
+    `floor` the plane stays in the model for its geom id but rays skip it."""
+    group = f' group="{_ANALYTIC_GROUP}"' if floor is not None else ""
     geoms = [
         f'<geom name="{FLOOR_GEOM}" type="plane" size="{_f(spec.floor_half_size_m)} '
-        f'{_f(spec.floor_half_size_m)} 0.1"/>'
+        f'{_f(spec.floor_half_size_m)} 0.1"{group}/>'
     ]
     for index, obj in enumerate(objects):
         geoms.append(_geom_xml(f"object_{index}", obj))
@@ -304,21 +328,39 @@ def build_scene(
     ]
     for frame, T_base_lidar in (lidar_mounts or {}).items():
         robot.append(f'<site name="{frame}" {_pose_xml(T_base_lidar)}/>')
+    walker_bodies = [
+        f'<body name="{_walker_body(k)}" mocap="true">'
+        + _geom_xml(f"walker_{k}", walker.at(0.0), pose=False)
+        + "</body>"
+        for k, walker in enumerate(walkers)
+    ]
     xml = (
         '<mujoco model="fleetcal-synth"><worldbody>'
         + "".join(geoms)
         + f'<body name="{ROBOT_BODY}" mocap="true">'
         + "".join(robot)
-        + "</body></worldbody></mujoco>"
+        + "</body>"
+        + "".join(walker_bodies)
+        + "</worldbody></mujoco>"
     )
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
     geom_object = np.full(model.ngeom, -1, dtype=np.int32)
+    geom_walker = np.full(model.ngeom, -1, dtype=np.int32)
     reflectivity = np.full(model.ngeom, spec.floor_reflectivity)
     for index, obj in enumerate(objects):
         geom_id = model.geom(f"object_{index}").id
         geom_object[geom_id] = index
         reflectivity[geom_id] = obj.reflectivity
+    walker_geoms = [model.geom(f"walker_{k}").id for k in range(len(walkers))]
+    for index, (geom_id, walker) in enumerate(zip(walker_geoms, walkers, strict=True)):
+        geom_object[geom_id] = NOT_STATIC
+        geom_walker[geom_id] = index
+        reflectivity[geom_id] = walker.reflectivity
+    groups = None
+    if floor is not None:
+        groups = np.ones(6, dtype=np.uint8)
+        groups[_ANALYTIC_GROUP] = 0
     scene = Scene(
         model=model,
         data=data,
@@ -327,16 +369,27 @@ def build_scene(
         geom_object=geom_object,
         object_geom=np.array(
             [model.geom(f"object_{k}").id for k in range(len(objects))]
+            + walker_geoms
             + [model.geom(FLOOR_GEOM).id],
             dtype=np.int32,
         ),
         geom_reflectivity=reflectivity,
+        floor=floor,
+        walkers=tuple(walkers),
+        geom_walker=geom_walker,
+        ray_groups=groups,
     )
     scene.place_robot(np.eye(4))
+    scene.place_walkers(0.0)
     return scene
 
 
-def _geom_xml(name: str, obj: SceneObject) -> str:
+def _walker_body(index: int) -> str:
+    return f"walker_body_{index}"
+
+
+def _geom_xml(name: str, obj: SceneObject, pose: bool = True) -> str:
+    """The geom of `obj`, at its pose (`pose`) or at its body's origin."""
     d = obj.dimensions
     T = obj.T_world_object
     if obj.kind is ObjectKind.BOX:
@@ -347,7 +400,8 @@ def _geom_xml(name: str, obj: SceneObject) -> str:
         size = f"{_f(d['radius'])} {_f(d['length'] / 2)}"
         # MuJoCo's capsule runs along its own z; lay it along the object's x.
         T = T @ make_transform(Rotation.from_euler("y", 90, degrees=True).as_matrix(), np.zeros(3))
-    return f'<geom name="{name}" type="{obj.kind.value}" size="{size}" {_pose_xml(T)}/>'
+    placement = _pose_xml(T if pose else invert(obj.T_world_object) @ T)
+    return f'<geom name="{name}" type="{obj.kind.value}" size="{size}" {placement}/>'
 
 
 def _pose_xml(T: Matrix4) -> str:

@@ -1,7 +1,8 @@
 """Simulated LiDAR scans with noise labels, and whole calibration problems built in memory.
 
-`scan` casts one LiDAR's rays into a scene. `World` fixes everything a seed decides (objects,
-true and perturbed extrinsics, odometry errors) and simulates any scan of a recording on demand,
+`scan` casts one LiDAR's rays into a scene. `World` fixes everything a seed decides (objects, the
+room, walkers and floor where the scenario has them, true and perturbed extrinsics, odometry
+errors) and simulates any scan of a recording on demand,
 each with its own random stream, so a scan's points do not depend on which other scans were
 simulated: `simulate_problem` (stops only, in memory) and `write_recording` (every scan, to a
 bag) produce the same stop clouds.
@@ -13,19 +14,24 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError
 from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, Stop
+from pipeline.synth.dust import DustSpec, draw_dust
+from pipeline.synth.floor import draw_floor
 from pipeline.synth.lidar_models import LidarModel
 from pipeline.synth.motion import interpolate_drift
 from pipeline.synth.perturbation import drift_errors, random_perturbation
 from pipeline.synth.raycast import cast_with_footprint
+from pipeline.synth.room import Room, build_room
 from pipeline.synth.scenarios import ScenarioSpec, get_scenario
-from pipeline.synth.scene import Scene, build_scene, place_objects
+from pipeline.synth.scene import NOT_STATIC, Scene, build_scene, place_objects
 from pipeline.synth.truth import LidarTruth, ScanLabels, StopTruth, Truth
+from pipeline.synth.walkers import Walker, draw_walkers
 from pipeline.transforms import Matrix4
 
 PoseFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
@@ -35,6 +41,7 @@ _NS = 1_000_000_000
 _MAX_INTENSITY = 255.0
 # Stream ids that keep the random draws of one concern independent of the others.
 _SCENE, _SCAN, _EXTRINSICS, _ODOMETRY, _DRIFT = 0, 1, 2, 3, 4
+_ROOM, _WALKERS, _FLOOR = 5, 6, 7
 
 
 @dataclass(frozen=True)
@@ -42,7 +49,8 @@ class LabelledScan:
     """One scan. `points` (N, 3) float64 in the LiDAR frame *at each point's firing time* (no
     motion compensation, as drivers publish them); `times` (N,) seconds since the recording
     started; `intensity` (N,) float32; `is_bleeding` (N,) bool; `object_index` (N,) int16
-    (index into the scene's objects, -1 the floor)."""
+    (index into the scene's objects, -1 the floor, -2 a walker or dust); `is_moving` (N,) bool
+    (on a walker); `is_spurious` (N,) bool (dust)."""
 
     stamp_ns: int
     points: NDArray[np.float64]
@@ -50,6 +58,8 @@ class LabelledScan:
     intensity: NDArray[np.float32]
     is_bleeding: NDArray[np.bool_]
     object_index: NDArray[np.int16]
+    is_moving: NDArray[np.bool_]
+    is_spurious: NDArray[np.bool_]
 
     def __len__(self) -> int:
         return len(self.points)
@@ -66,6 +76,7 @@ def scan(
     rate_scale: float = 1.0,
     slice_s: float = 0.01,
     stamp_ns: int = 0,
+    dust: DustSpec | None = None,
 ) -> LabelledScan:
     """Cast `lidar`'s rays fired in `[t0, t0 + duration)` (seconds since the recording started).
 
@@ -73,7 +84,8 @@ def scan(
     cast in slices of `slice_s`, each from the pose at its middle. Rays that hit nothing within
     the model's range give no point. Range noise is Gaussian with the model's sigma; bleeding
     points come from `raycast.cast_with_footprint`, labelled when they float more than three
-    sigmas away from both surfaces they mix.
+    sigmas away from both surfaces they mix. With `dust`, a few rays return from dust near the
+    sensor instead (drawn from `rng` after everything else, so the other rays keep their noise).
     """
     firing = lidar.firing(t0, duration, rate_scale)
     starts: NDArray[np.int64] = np.zeros(1, dtype=np.int64)
@@ -108,20 +120,33 @@ def scan(
     )
     range_m, geom = returns.range_m, returns.geom
     keep = np.isfinite(range_m) & (range_m >= lidar.min_range_m)
-    measured = range_m[keep] + rng.normal(0.0, lidar.range_noise_m, size=int(keep.sum()))
-    geom = geom[keep]
+    measured = np.full(len(range_m), np.inf)
+    measured[keep] = range_m[keep] + rng.normal(0.0, lidar.range_noise_m, size=int(keep.sum()))
+    reflectivity = np.where(keep, scene.geom_reflectivity[geom], 0.0)
+    cos_incidence = returns.cos_incidence
+    object_index = scene.geom_object[geom].astype(np.int16)
+    is_spurious = np.zeros(len(range_m), dtype=bool)
+    if dust is not None:
+        specks = draw_dust(dust, rng, np.where(keep, range_m, np.inf), lidar.min_range_m)
+        is_spurious = specks.is_dust
+        measured = np.where(is_spurious, specks.range_m, measured)
+        reflectivity = np.where(is_spurious, specks.reflectivity, reflectivity)
+        cos_incidence = np.where(is_spurious, 1.0, cos_incidence)
+        object_index = np.where(is_spurious, NOT_STATIC, object_index).astype(np.int16)
+        keep = keep | is_spurious
     intensity = np.clip(
-        _MAX_INTENSITY * scene.geom_reflectivity[geom] * returns.cos_incidence[keep],
-        0.0,
-        _MAX_INTENSITY,
+        _MAX_INTENSITY * reflectivity[keep] * cos_incidence[keep], 0.0, _MAX_INTENSITY
     )
+    is_moving = (scene.geom_walker[geom] >= 0) & ~is_spurious
     return LabelledScan(
         stamp_ns=stamp_ns,
-        points=firing.directions[keep] * measured[:, None],
+        points=firing.directions[keep] * measured[keep, None],
         times=firing.times[keep],
         intensity=intensity.astype(np.float32),
-        is_bleeding=returns.is_bleeding[keep],
-        object_index=scene.geom_object[geom].astype(np.int16),
+        is_bleeding=returns.is_bleeding[keep] & ~is_spurious[keep],
+        object_index=object_index[keep],
+        is_moving=is_moving[keep],
+        is_spurious=is_spurious[keep],
     )
 
 
@@ -166,12 +191,22 @@ class World:
             for a, b in self.spec.motion.stop_intervals()
         )
 
+    def T_world_base(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """True `T_world_base` (K, 4, 4) at times `t` (K,): the planned planar pose, resting on
+        the floor (its height, roll and pitch follow the floor under the wheels)."""
+        planar = self.spec.motion.poses(t)
+        if self.scene.floor is None:
+            return planar
+        size = self.spec.scene.robot_size_m
+        return self.scene.floor.rest(planar, (size[0], size[1]))
+
     def T_world_lidar(self, lidar_index: int) -> PoseFn:
         T_base_lidar = self.T_base_lidar_true[lidar_index]
-        return lambda t: self.spec.motion.poses(t) @ T_base_lidar
+        return lambda t: self.T_world_base(t) @ T_base_lidar
 
     def odometry(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Odometry's `T_odom_base` (K, 4, 4): the true pose times the drifting error."""
+        """Odometry's `T_odom_base` (K, 4, 4): the planar pose times the drifting error. Wheel
+        odometry integrates the wheels' travel in the plane; it never sees the floor's tilt."""
         return self.spec.motion.poses(t) @ interpolate_drift(
             self.spec.motion, self.odometry_errors, t
         )
@@ -186,7 +221,9 @@ class World:
         pose: Matrix4 | PoseFn = pose_fn
         if self.is_still(lidar_index, scan_index):
             pose = pose_fn(np.array([t0]))[0]
-        self.scene.place_robot(self.spec.motion.poses(np.array([t0 + period / (2 * _NS)]))[0])
+        middle = t0 + period / (2 * _NS)
+        self.scene.place_robot(self.T_world_base(np.array([middle]))[0])
+        self.scene.place_walkers(middle)
         return scan(
             self.scene,
             mount.model,
@@ -196,6 +233,7 @@ class World:
             rng,
             rate_scale=self.rate_scale,
             stamp_ns=self.spec.start_time_ns + scan_index * period,
+            dust=self.spec.scene.dust,
         )
 
     @cached_property
@@ -205,7 +243,7 @@ class World:
 
     def truth(self, labels: dict[str, ScanLabels] | None = None) -> Truth:
         start_s = self.spec.start_time_ns / _NS
-        stop_true = self.spec.motion.poses(self.stop_times[:, 0])
+        stop_true = self.T_world_base(self.stop_times[:, 0])
         stop_initial = self.odometry(self.stop_times[:, 0])
         return Truth(
             scenario=self.spec.name,
@@ -240,6 +278,8 @@ class World:
             labels=labels or {},
             scenario_class=self.spec.scenario_class,
             spec=self.spec.model_dump(mode="json"),
+            floor=self.scene.floor,
+            walkers=self.scene.walkers,
         )
 
 
@@ -252,12 +292,9 @@ def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0)
             "of every LiDAR's points"
         )
     motion = spec.motion
-    objects = place_objects(
-        spec.scene, np.random.default_rng([seed, _SCENE]), motion.radius_band_m()
-    )
     true = tuple(mount.T_base_lidar() for mount in spec.lidars)
-    scene = build_scene(
-        spec.scene, objects, {m.frame: T for m, T in zip(spec.lidars, true, strict=True)}
+    scene = _build_world_scene(
+        spec, seed, dict(zip((m.frame for m in spec.lidars), true, strict=True))
     )
     rng = np.random.default_rng([seed, _EXTRINSICS])
     initial = tuple(T @ random_perturbation(rng, spec.extrinsic_error) for T in true)
@@ -276,6 +313,50 @@ def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0)
         T_base_lidar_initial=initial,
         odometry_errors=errors,
     )
+
+
+def _build_world_scene(
+    spec: ScenarioSpec, seed: int, mounts: dict[str, NDArray[np.float64]]
+) -> Scene:
+    """The scene `seed` draws: the room, the floor and the walkers (each from its own random
+    stream, so an option left unset changes nothing else), then the objects clear of them."""
+    scene_spec, motion = spec.scene, spec.motion
+    keep_out = motion.radius_band_m()
+    band = scene_spec.robot_band(keep_out)
+    room = floor = None
+    walkers: tuple[Walker, ...] = ()
+    if scene_spec.room is not None:
+        room = build_room(scene_spec.room, np.random.default_rng([seed, _ROOM]), band)
+    if scene_spec.floor is not None:
+        floor = draw_floor(
+            scene_spec.floor, np.random.default_rng([seed, _FLOOR]), scene_spec.floor_half_size_m
+        )
+    if scene_spec.walkers is not None:
+        walkers = draw_walkers(
+            scene_spec.walkers, np.random.default_rng([seed, _WALKERS]), band, room
+        )
+    objects = place_objects(
+        scene_spec, np.random.default_rng([seed, _SCENE]), keep_out, _free_of(room, walkers)
+    )
+    objects += room.structures if room is not None else ()
+    if floor is not None:
+        objects = tuple(floor.stand(obj) for obj in objects)
+    return build_scene(scene_spec, objects, mounts, floor=floor, walkers=walkers)
+
+
+def _free_of(
+    room: Room | None, walkers: tuple[Walker, ...]
+) -> Callable[[NDArray[np.float64], float], bool] | None:
+    """Whether a footprint circle keeps clear of the room's structures and the walkers' ways."""
+    if room is None and not walkers:
+        return None
+
+    def free(xy: NDArray[np.float64], radius: float) -> bool:
+        return (room is None or room.gap(xy, radius) >= 0) and all(
+            walker.path_gap(xy, radius) >= 0 for walker in walkers
+        )
+
+    return free
 
 
 def simulate_problem(
@@ -346,11 +427,15 @@ def simulate_problem(
 def labels_of(scans: list[LabelledScan]) -> ScanLabels:
     """Concatenate the labels of scans (in message order) into the `labels.npz` layout."""
     sizes = np.array([len(s.is_bleeding) for s in scans], dtype=np.int64)
+
+    def joined(name: str, dtype: type[np.generic]) -> NDArray[Any]:
+        return np.concatenate([getattr(s, name) for s in scans]) if scans else np.zeros(0, dtype)
+
     return ScanLabels(
         stamps_ns=np.array([s.stamp_ns for s in scans], dtype=np.int64),
         offsets=np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
-        is_bleeding=np.concatenate([s.is_bleeding for s in scans]) if scans else np.zeros(0, bool),
-        object_index=(
-            np.concatenate([s.object_index for s in scans]) if scans else np.zeros(0, np.int16)
-        ),
+        is_bleeding=joined("is_bleeding", np.bool_),
+        object_index=joined("object_index", np.int16),
+        is_moving=joined("is_moving", np.bool_),
+        is_spurious=joined("is_spurious", np.bool_),
     )

@@ -7,7 +7,12 @@ both back. Layout of `labels.npz`, per LiDAR frame `F` (key names are `F/<name>`
     the same plus the topic's `spec.header_clock_offset_ns`, where the scenario offsets it;
   - `F/offsets` (S + 1,) int64: message `s` holds points `offsets[s]:offsets[s + 1]` below;
   - `F/is_bleeding` (N,) bool: the point is a mixed return floating between two surfaces;
-  - `F/object_index` (N,) int16: the object the point lies on (index into `objects`), -1 the floor.
+  - `F/object_index` (N,) int16: the object the point lies on (index into `objects`), -1 the floor,
+    -2 none of them (a walker or dust);
+  - `F/is_moving` (N,) bool: the point lies on a walker (a person or cart walking by);
+  - `F/is_spurious` (N,) bool: a return from dust near the sensor, on no surface.
+`truth.json` also holds the analytic floor (`floor`, null for the plane z = 0), the walkers' ways
+(`walkers`) and, per stop, the base's true height, roll and pitch on that floor (`base_on_floor`).
 Points keep the order of the message's data, so labels line up with a decoded cloud point by point.
 Stop times are on the bag's log clock too. `spec` holds the whole scenario (every drawn factor of
 a randomised one) and `scenario_class` its benchmark class.
@@ -25,9 +30,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from pipeline.errors import BadInputError
-from pipeline.synth.scene import ObjectKind, SceneObject
+from pipeline.synth.floor import FloorSurface
+from pipeline.synth.objects import ObjectKind, ObjectRole, SceneObject
+from pipeline.synth.walkers import Walker
 from pipeline.transforms import (
     Matrix4,
     from_translation_xyzw,
@@ -44,10 +52,13 @@ _NS = 1_000_000_000
 
 @dataclass(frozen=True)
 class PointLabels:
-    """Labels of a cloud, point by point: `is_bleeding` (N,) bool, `object_index` (N,) int16."""
+    """Labels of a cloud, point by point: `is_bleeding` (N,) bool, `object_index` (N,) int16,
+    `is_moving` (N,) bool, `is_spurious` (N,) bool (the module docstring says what each means)."""
 
     is_bleeding: NDArray[np.bool_]
     object_index: NDArray[np.int16]
+    is_moving: NDArray[np.bool_]
+    is_spurious: NDArray[np.bool_]
 
     def __len__(self) -> int:
         return len(self.is_bleeding)
@@ -61,6 +72,8 @@ class ScanLabels:
     offsets: NDArray[np.int64]
     is_bleeding: NDArray[np.bool_]
     object_index: NDArray[np.int16]
+    is_moving: NDArray[np.bool_]
+    is_spurious: NDArray[np.bool_]
 
     def between(
         self, t_start_ns: int, t_end_ns: int, after_ns: int, before_ns: int = 0
@@ -81,7 +94,12 @@ class ScanLabels:
             if len(chosen)
             else np.zeros(0, dtype=np.int64)
         )
-        return PointLabels(self.is_bleeding[index], self.object_index[index])
+        return PointLabels(
+            self.is_bleeding[index],
+            self.object_index[index],
+            self.is_moving[index],
+            self.is_spurious[index],
+        )
 
 
 @dataclass(frozen=True)
@@ -130,6 +148,8 @@ class Truth:
     scenario_class: str = ""
     spec: Mapping[str, Any] = field(default_factory=dict)
     """The whole `ScenarioSpec` as JSON: every factor the recording was drawn with."""
+    floor: FloorSurface | None = None
+    walkers: tuple[Walker, ...] = ()
 
     def lidar(self, frame: str) -> LidarTruth:
         for lidar in self.lidars:
@@ -195,12 +215,15 @@ class Truth:
                     "perturbation": _difference_json(
                         stop.T_odom_base_true, stop.T_odom_base_initial
                     ),
+                    "base_on_floor": _tilt_json(stop.T_odom_base_true),
                 }
                 for stop in self.stops
             ],
             "objects": [obj.to_json() for obj in self.objects],
             "scenario_class": self.scenario_class,
             "spec": dict(self.spec),
+            "floor": None if self.floor is None else self.floor.to_json(),
+            "walkers": [walker.to_json() for walker in self.walkers],
             "labels": {
                 "file": LABELS_FILE,
                 "keys": {
@@ -210,12 +233,20 @@ class Truth:
                 "layout": "per LiDAR frame F: F/stamps_ns (S,) int64 log times in message "
                 "order (header stamp = log time + spec.header_clock_offset_ns[topic]); "
                 "F/offsets (S+1,) int64, message s holds points offsets[s]:offsets[s+1]; "
-                "F/is_bleeding (N,) bool; F/object_index (N,) int16, -1 = floor",
+                "F/is_bleeding (N,) bool; F/object_index (N,) int16, -1 = floor, -2 = a walker "
+                "or dust; F/is_moving (N,) bool, on a walker; F/is_spurious (N,) bool, dust",
             },
         }
 
 
-_LABEL_ARRAYS = ("stamps_ns", "offsets", "is_bleeding", "object_index")
+_LABEL_ARRAYS = (
+    "stamps_ns",
+    "offsets",
+    "is_bleeding",
+    "object_index",
+    "is_moving",
+    "is_spurious",
+)
 
 
 def write_truth(truth: Truth, out_dir: Path) -> None:
@@ -251,7 +282,11 @@ def load_truth(out_dir: Path | str) -> Truth:
     labels: dict[str, ScanLabels] = {}
     with np.load(out_dir / doc["labels"]["file"]) as archive:
         for frame, keys in doc["labels"]["keys"].items():
-            labels[frame] = ScanLabels(**{name: archive[key] for name, key in keys.items()})
+            arrays = {name: archive[key] for name, key in keys.items()}
+            # Recordings written before walkers and dust existed have neither label.
+            for name in ("is_moving", "is_spurious"):
+                arrays.setdefault(name, np.zeros(len(arrays["is_bleeding"]), dtype=bool))
+            labels[frame] = ScanLabels(**arrays)
     return Truth(
         scenario=doc["scenario"],
         seed=doc["seed"],
@@ -287,12 +322,15 @@ def load_truth(out_dir: Path | str) -> Truth:
                 dimensions=entry["dimensions"],
                 T_world_object=_pose_from_json(entry["pose"]),
                 reflectivity=entry["reflectivity"],
+                role=ObjectRole(entry.get("role", ObjectRole.OBJECT.value)),
             )
             for entry in doc["objects"]
         ),
         labels=labels,
         scenario_class=doc.get("scenario_class", ""),
         spec=doc.get("spec", {}),
+        floor=None if doc.get("floor") is None else FloorSurface.from_json(doc["floor"]),
+        walkers=tuple(Walker.from_json(entry) for entry in doc.get("walkers", [])),
     )
 
 
@@ -308,6 +346,16 @@ def _pose_json(T: Matrix4) -> dict[str, list[float]]:
 
 def _pose_from_json(entry: Mapping[str, Any]) -> Matrix4:
     return from_translation_xyzw(entry["translation"], entry["rotation_xyzw"])
+
+
+def _tilt_json(T_world_base: Matrix4) -> dict[str, float]:
+    """Height, roll and pitch of the base (fixed-axis roll, pitch, yaw): zero on a flat floor."""
+    _yaw, pitch, roll = Rotation.from_matrix(T_world_base[:3, :3]).as_euler("ZYX", degrees=True)
+    return {
+        "height_m": float(T_world_base[2, 3]),
+        "roll_deg": float(roll),
+        "pitch_deg": float(pitch),
+    }
 
 
 def _difference_json(T_true: Matrix4, T_initial: Matrix4) -> dict[str, float]:

@@ -272,7 +272,7 @@
         "section",
         { class: "card narrow" },
         h("h1", {}, "fleetcal dashboard"),
-        h("p", {}, "Enter an API key with the read scope (", h("code", {}, "fleetcal keys create --scope read"), ", or the admin key ", h("code", {}, "fleetcal serve"), " printed on its first start). It is kept in this browser tab's session only."),
+        h("p", {}, "Enter an API key with the read scope (", h("code", {}, "fleetcal keys create --scope read --data-dir DIR"), " with the DIR the service runs on, or the admin key ", h("code", {}, "fleetcal serve"), " printed on its first start). It is kept in this browser tab's session only."),
         form,
         error,
       ),

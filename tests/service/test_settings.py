@@ -47,3 +47,32 @@ def test_bad_values_are_refused(monkeypatch: pytest.MonkeyPatch, name: str, valu
     monkeypatch.setenv(name, value)
     with pytest.raises(ValidationError):
         Settings()
+
+
+@pytest.mark.parametrize(
+    ("name", "url", "message"),
+    [
+        ("STORAGE", "ftp://host/dir", "unsupported storage URL 'ftp://host/dir'"),
+        ("STORAGE", "s3:///prefix", "unsupported storage URL 's3:///prefix'"),
+        ("STORAGE", "file:relative/dir", "use file:///absolute/dir or s3://bucket"),
+        ("STORAGE", "/srv/fleetcal", "unsupported storage URL"),
+        ("DATABASE", "localhost:5432/fleet", "is not a database URL; use sqlite:////"),
+        (
+            "DATABASE",
+            "mysql+pymysql://u@db/x",
+            "names the database 'mysql'; fleetcal runs on SQLite",
+        ),
+        ("DATABASE", "postgres://u@db/fleet", "names the database 'postgres'"),
+        (
+            "DATABASE",
+            "postgresql+nodriver://u@db/x",
+            "the driver 'nodriver', which is not installed",
+        ),
+    ],
+)
+def test_an_unusable_url_is_refused_with_the_forms_to_use(
+    monkeypatch: pytest.MonkeyPatch, name: str, url: str, message: str
+) -> None:
+    monkeypatch.setenv(f"FLEETCAL_{name}_URL", url)
+    with pytest.raises(ValidationError, match=message):
+        Settings()

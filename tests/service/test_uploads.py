@@ -174,14 +174,18 @@ def test_uploads_left_by_a_killed_process_are_swept_at_start(tmp_path: Path) -> 
 
     storage_root = tmp_path / "storage"
     (storage_root / ".tmp").mkdir(parents=True)
-    stale, fresh = storage_root / ".tmp" / "old.part", storage_root / ".tmp" / "new.part"
-    stale.write_bytes(b"half an upload")
-    fresh.write_bytes(b"an upload in progress elsewhere")
+    killed, older = storage_root / ".tmp" / "new.part", storage_root / ".tmp" / "old.part"
+    killed.write_bytes(b"half an upload, its writer gone (no lock)")
+    older.write_bytes(b"half an upload")
     old = time.time() - 7 * 3600
-    os.utime(stale, (old, old))
+    os.utime(older, (old, old))
+    in_progress = LocalStorage(storage_root).begin_upload("recordings/R1/run")  # holds its lock
+    in_progress.write(b"an upload in progress in another process")
     services = start_services(Settings(data_dir=tmp_path))
     services.db.dispose()
-    assert not stale.exists() and fresh.exists()
+    assert not killed.exists() and not older.exists()
+    in_progress.commit()
+    assert services.storage.exists("recordings/R1/run")
 
 
 def test_an_upload_lands_in_s3_storage(settings: Settings, s3_env: None, s3_endpoint: str) -> None:

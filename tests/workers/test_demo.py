@@ -8,8 +8,10 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from typer.testing import CliRunner
 
 from tests.workers.runs import ROOT, entrypoint_env
+from workers.cli import app
 
 
 @pytest.mark.slow
@@ -49,5 +51,22 @@ def test_demo_once_runs_the_main_job_and_exits_with_the_verdict(tmp_path: Path) 
         r"|lidar_rear +undetermined by the data",
         out,
     )
-    assert "admin key" not in out, "--once keeps no service running to use it with"
+    # The first start's admin key is shown as `serve` shows it, and the hint names the directory.
+    assert "Created the first admin key; it is shown only this once, store it now:\n  fck_" in out
+    assert f"`fleetcal keys create --scope read --data-dir {tmp_path}`" in out
+    assert "[1/5] service   http://127.0.0.1:" in out and f"(data directory {tmp_path})" in out
     assert (tmp_path / "fleetcal.db").is_file(), "the state lives under --data-dir"
+
+
+def test_demo_with_a_bad_setting_stops_before_it_creates_a_key(tmp_path: Path) -> None:
+    result = CliRunner().invoke(
+        app,
+        ["demo", "--once", "--data-dir", str(tmp_path / "state"), "--port", "0"],
+        env={"FLEETCAL_STORAGE_URL": "storage"},
+    )
+    assert result.exit_code == 2 and isinstance(result.exception, SystemExit)
+    assert result.stderr == (
+        "error: FLEETCAL_STORAGE_URL: unsupported storage URL 'storage': use file:///absolute/dir "
+        "or s3://bucket[/prefix]\n"
+    )
+    assert result.stdout == "" and not (tmp_path / "state").exists()

@@ -63,6 +63,24 @@ def test_bad_input_fails_the_run_at_once_with_the_typed_message(
     assert result_count(db, run_id) == 0
 
 
+def test_bad_input_is_logged_as_one_info_line_without_a_traceback(
+    settings: Settings, db: Database, caplog: pytest.LogCaptureFixture
+) -> None:
+    run_id = enqueue(db, config={"fail": "bad_input"})
+    with caplog.at_level(logging.DEBUG, logger="workers"), running_worker(settings):
+        wait_for("the run", finished(db, run_id))
+    about_the_failure = [r for r in caplog.records if "no stops" in r.getMessage()]
+    assert [(r.levelno, r.getMessage()) for r in about_the_failure] == [
+        (
+            logging.INFO,
+            f"run {run_id}: failed on bad input: "
+            "the recording has no stops: the robot never stood still for 1 s",
+        )
+    ]
+    assert not any("Traceback" in r.getMessage() for r in caplog.records)
+    assert all(r.levelno < logging.WARNING for r in caplog.records if str(run_id) in r.getMessage())
+
+
 def test_transient_errors_are_retried_until_the_attempts_run_out(
     settings: Settings, db: Database
 ) -> None:

@@ -85,3 +85,36 @@ def test_a_file_that_is_not_a_recording_exits_2(tmp_path: Path) -> None:
     result = run(str(bogus), "-o", str(tmp_path / "r.json"))
     assert result.exit_code == 2
     assert result.stderr.startswith("error: ")
+
+
+@pytest.mark.parametrize(
+    ("target", "message"),
+    [
+        (
+            "missing/result.json",
+            "cannot write {target}: No such file or directory; choose a writable path",
+        ),
+        (".", "cannot write {target}: it is a directory; name a file, e.g. {target}/result.json"),
+    ],
+)
+def test_an_unwritable_output_exits_2_before_the_recording_is_read(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, target: str, message: str
+) -> None:
+    def never(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the recording was read before the output was checked")
+
+    monkeypatch.setattr("pipeline.io.read_recording", never)
+    path = tmp_path / target
+    result = run(str(tmp_path / "absent.mcap"), "-o", str(path))
+    assert result.exit_code == 2
+    assert result.stderr == f"error: {message.format(target=path)}\n"
+
+
+def test_the_output_check_leaves_no_file_and_keeps_an_existing_one(tmp_path: Path) -> None:
+    from pipeline.cli.common import check_writable
+
+    check_writable(tmp_path / "new.json")
+    assert not (tmp_path / "new.json").exists()
+    (tmp_path / "old.json").write_text("kept")
+    check_writable(tmp_path / "old.json")
+    assert (tmp_path / "old.json").read_text() == "kept"
