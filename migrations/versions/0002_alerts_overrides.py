@@ -32,7 +32,8 @@ def _add_accepted(table: str) -> None:
     op.add_column(
         table, sa.Column("accepted", sa.Boolean(), nullable=False, server_default=sa.false())
     )
-    op.execute(sa.text(f"UPDATE {table} SET accepted = passed"))
+    rows = sa.table(table, sa.column("accepted", sa.Boolean()), sa.column("passed", sa.Boolean()))
+    op.execute(rows.update().values(accepted=rows.c.passed))
 
 
 def upgrade() -> None:
@@ -128,8 +129,8 @@ def downgrade() -> None:
     op.drop_table("webhooks")
     op.drop_index("ix_overrides_run_created", table_name="overrides")
     op.drop_table("overrides")
-    with op.batch_alter_table("lidar_extrinsics") as batch:
-        batch.drop_column("accepted")
+    # A plain DROP COLUMN (SQLite >= 3.35 has it): a batch copy of `results` would be refused
+    # while extrinsics and overrides rows refer to it.
+    op.drop_column("lidar_extrinsics", "accepted")
     op.drop_index("ix_results_robot_accepted", table_name="results")
-    with op.batch_alter_table("results") as batch:
-        batch.drop_column("accepted")
+    op.drop_column("results", "accepted")
