@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +37,8 @@ from pipeline.verdict import LidarEvidence, Verdict, judge
 
 Progress = Callable[[str, float, str], None]
 """`progress(stage, seconds, message)`: called once per finished stage."""
+IterationProgress = Callable[[int, int], None]
+"""`on_iteration(iteration, max_iterations)`: called after each iteration of the optimisation."""
 
 STAGES: tuple[str, ...] = (
     "denoise",
@@ -46,6 +49,10 @@ STAGES: tuple[str, ...] = (
     "observability",
     "verdict",
 )
+
+
+def _iteration_of(on_iteration: IterationProgress, max_iterations: int, iteration: int) -> None:
+    on_iteration(iteration, max_iterations)
 
 
 @dataclass(frozen=True)
@@ -336,6 +343,7 @@ def calibrate(
     problem: CalibrationProblem,
     config: PipelineConfig | None = None,
     progress: Progress | None = None,
+    on_iteration: IterationProgress | None = None,
 ) -> CalibrationResult:
     """Calibrate every LiDAR of `problem` relative to the reference; see `CalibrationResult`.
 
@@ -421,6 +429,9 @@ def calibrate(
             planes=planes if rough is not None else None,
             floor_G=rough.floor_G if rough is not None else None,
             normals=normals,
+            on_iteration=None
+            if on_iteration is None
+            else partial(_iteration_of, on_iteration, config.optimisation.max_iterations),
         )
         details.update(
             iterations=result.iterations,

@@ -18,7 +18,7 @@ Twists are `[rho (3), phi (3)]` applied on the left: `T_G_ref <- exp(d) T_G_ref`
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -624,6 +624,7 @@ def optimise(
     planes: Sequence[Sequence[Plane | None]] | None = None,
     floor_G: Plane | None = None,
     normals: Sequence[Sequence[Points]] | None = None,
+    on_iteration: Callable[[int], None] | None = None,
 ) -> OptimisationResult:
     """Refine the poses so every LiDAR's object map agrees with the reference LiDAR's.
 
@@ -633,7 +634,7 @@ def optimise(
     and `floor_G` (stage 3) add the floor terms; without them only the objects count.
     `normals[lidar][stop]` (N, 3): the points' surface normals when the caller has them
     (segmentation does); without them they are fitted here, and the clouds smoothed if
-    `smooth_clouds`.
+    `smooth_clouds`. `on_iteration(k)` is called after iteration k (progress for a caller).
     """
     started = time.perf_counter()
     fine_config = config.model_copy(
@@ -673,6 +674,8 @@ def optimise(
             stops, lidars, moved, damping = _step(problem, pairs, stops, lidars, scale, damping)
             history.append(lidars.copy())
             pairs = problem.associate(problem.place(stops, lidars))
+            if on_iteration is not None:
+                on_iteration(iteration)
             if moved is None or (
                 moved[0] < tolerance * config.translation_tolerance_m
                 and moved[1] < tolerance * config.rotation_tolerance_deg

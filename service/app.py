@@ -23,7 +23,19 @@ from service.db import Database
 from service.deps import Services
 from service.metrics import Metrics, MetricsMiddleware
 from service.problems import MethodNotAllowed, install_problem_handlers, problem_response
-from service.routes import exports, fleet, health, reports, robots, runs, tolerance
+from service.routes import (
+    comparison,
+    csv_exports,
+    exports,
+    fleet,
+    health,
+    overrides,
+    reports,
+    robots,
+    runs,
+    tolerance,
+    webhooks,
+)
 from service.settings import Settings
 from service.storage import Storage, make_storage
 
@@ -64,7 +76,19 @@ def create_app(settings: Settings) -> FastAPI:
     app.add_exception_handler(HTTPStatus.METHOD_NOT_ALLOWED, method_not_allowed)
     app.add_middleware(MetricsMiddleware, metrics=metrics)
     # Each router carries its full prefix (/v1/...), so route templates in metrics are complete.
-    for module in (health, runs, robots, tolerance, fleet, reports, exports):
+    for module in (
+        health,
+        runs,
+        overrides,
+        robots,
+        comparison,
+        tolerance,
+        fleet,
+        reports,
+        exports,
+        csv_exports,
+        webhooks,
+    ):
         app.include_router(module.router)
     app.include_router(dashboard_router)
     return app

@@ -95,6 +95,7 @@ def _require(scope: Scope) -> object:
 
 ReadKey = Annotated[Principal, _require(Scope.READ)]
 AdminKey = Annotated[Principal, _require(Scope.ADMIN)]
+OverrideKey = Annotated[Principal, _require(Scope.OVERRIDE)]
 
 
 RobotIdPath = Annotated[str, Path(pattern=ROBOT_ID_PATTERN, description="The robot's id.")]

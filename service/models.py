@@ -22,18 +22,23 @@ from sqlalchemy import (
     Integer,
     MetaData,
     String,
+    Text,
     TypeDecorator,
     UniqueConstraint,
     Uuid,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-from service.enums import RunKind, RunStatus, Scope
+from service.enums import DeliveryStatus, EventType, OverrideAction, RunKind, RunStatus, Scope
 
 __all__ = [
     "ApiKey",
     "Base",
+    "DeliveryStatus",
+    "EventType",
     "LidarExtrinsic",
+    "Override",
+    "OverrideAction",
     "Result",
     "Robot",
     "Run",
@@ -42,6 +47,8 @@ __all__ = [
     "Scope",
     "ToleranceProfile",
     "UTCDateTime",
+    "Webhook",
+    "WebhookDelivery",
     "utcnow",
 ]
 
@@ -83,14 +90,14 @@ class UTCDateTime(TypeDecorator[datetime]):
         return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
 
 
-def _enum(cls: type[enum.StrEnum], name: str) -> Enum:
+def _enum(cls: type[enum.StrEnum], name: str, length: int = 16) -> Enum:
     # VARCHAR + CHECK on both databases: no PostgreSQL enum type to migrate when a value is added.
     return Enum(
         cls,
         name=name,
         native_enum=False,
         create_constraint=True,
-        length=16,
+        length=length,
         values_callable=lambda members: [member.value for member in members],
         validate_strings=True,
     )
@@ -179,12 +186,17 @@ class Result(Base):
     """The `result.json` of a run (at most one per run: the primary key is the run's id)."""
 
     __tablename__ = "results"
-    __table_args__ = (Index("ix_results_robot_passed", "robot_id", "passed", "measured_at"),)
+    __table_args__ = (
+        Index("ix_results_robot_passed", "robot_id", "passed", "measured_at"),
+        Index("ix_results_robot_accepted", "robot_id", "accepted", "measured_at"),
+    )
 
     run_id: Mapped[uuid.UUID] = mapped_column(ForeignKey("runs.id"), primary_key=True)
     robot_id: Mapped[str] = mapped_column(ForeignKey("robots.id"))
     document: Mapped[dict[str, Any]]
     passed: Mapped[bool] = mapped_column(Boolean)
+    # The verdict, unless an operator overrode it (`Override`): the calibration in use follows it.
+    accepted: Mapped[bool] = mapped_column(Boolean)
     metric_error_initial: Mapped[float | None] = mapped_column(Float)
     metric_error_final: Mapped[float | None] = mapped_column(Float)
     pipeline_version: Mapped[str] = mapped_column(String(64))
@@ -209,9 +221,10 @@ class LidarExtrinsic(Base):
     robot_id: Mapped[str] = mapped_column(ForeignKey("robots.id"))
     frame: Mapped[str] = mapped_column(String(128))
     measured_at: Mapped[datetime]
-    # Copied from the result's verdict (immutable once written) so history can keep accepted
-    # calibrations only without a join.
+    # Copied from the result's verdict (immutable once written) and its accepted flag (changed by
+    # an override in the same transaction) so history can keep accepted ones without a join.
     passed: Mapped[bool] = mapped_column(Boolean)
+    accepted: Mapped[bool] = mapped_column(Boolean)
     is_reference: Mapped[bool] = mapped_column(Boolean)
     tx: Mapped[float] = mapped_column(Float)
     ty: Mapped[float] = mapped_column(Float)
@@ -235,3 +248,68 @@ class ApiKey(Base):
     name: Mapped[str | None] = mapped_column(String(255))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     revoked_at: Mapped[datetime | None]
+
+
+class Override(Base):
+    """An operator's accept or reject of a run's result: who, when and why (the audit trail)."""
+
+    __tablename__ = "overrides"
+    __table_args__ = (Index("ix_overrides_run_created", "run_id", "created_at"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    run_id: Mapped[uuid.UUID] = mapped_column(ForeignKey("results.run_id"))
+    robot_id: Mapped[str] = mapped_column(ForeignKey("robots.id"))
+    action: Mapped[OverrideAction] = mapped_column(_enum(OverrideAction, "override_action"))
+    reason: Mapped[str] = mapped_column(String(1000))
+    key_id: Mapped[str] = mapped_column(String(32))
+    """The API key that made it (`api_keys.id`; kept when the key is revoked)."""
+    key_name: Mapped[str | None] = mapped_column(String(255))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Webhook(Base):
+    """A URL an admin registered to be told of `events` (of robots of `robot_model`, if set)."""
+
+    __tablename__ = "webhooks"
+
+    id: Mapped[uuid.UUID] = mapped_column(primary_key=True, default=uuid.uuid4)
+    url: Mapped[str] = mapped_column(String(2048))
+    secret: Mapped[str] = mapped_column(String(128))
+    """Signs each delivery (HMAC-SHA256 of the body); the receiver holds a copy, so not hashed."""
+    events: Mapped[list[str]]
+    robot_model: Mapped[str | None] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    deleted_at: Mapped[datetime | None]
+
+
+class WebhookDelivery(Base):
+    """The outbox: one row per event and webhook, written in the event's own transaction, sent
+    by the workers (`workers.webhooks`) with a lease and backoff like a run."""
+
+    __tablename__ = "webhook_deliveries"
+    __table_args__ = (
+        Index("ix_webhook_deliveries_due", "status", "available_at"),
+        Index("ix_webhook_deliveries_webhook_created", "webhook_id", "created_at", "id"),
+        UniqueConstraint("webhook_id", "event_id"),
+    )
+
+    id: Mapped[uuid.UUID] = mapped_column(primary_key=True, default=uuid.uuid4)
+    webhook_id: Mapped[uuid.UUID] = mapped_column(ForeignKey("webhooks.id"))
+    event_id: Mapped[uuid.UUID]
+    """The same for every webhook told of one event: receivers drop duplicates by it."""
+    event: Mapped[EventType] = mapped_column(_enum(EventType, "event_type", length=32))
+    run_id: Mapped[uuid.UUID | None] = mapped_column(ForeignKey("runs.id"))
+    robot_id: Mapped[str] = mapped_column(String(64))
+    body: Mapped[str] = mapped_column(Text)
+    """The exact bytes sent (UTF-8 JSON) and signed: every retry sends the same."""
+    status: Mapped[DeliveryStatus] = mapped_column(_enum(DeliveryStatus, "delivery_status"))
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    max_attempts: Mapped[int] = mapped_column(Integer)
+    available_at: Mapped[datetime] = mapped_column(default=utcnow)
+    lease_owner: Mapped[str | None] = mapped_column(String(255))
+    lease_expires_at: Mapped[datetime | None]
+    last_status_code: Mapped[int | None] = mapped_column(Integer)
+    last_error: Mapped[str | None] = mapped_column(String(1000))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    delivered_at: Mapped[datetime | None]
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)

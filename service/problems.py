@@ -82,6 +82,7 @@ ProfileNotFound = _error(
     "tolerance-profile-not-found", "No such tolerance profile", HTTPStatus.NOT_FOUND
 )
 NotFound = _error("not-found", "Not found", HTTPStatus.NOT_FOUND)
+WebhookNotFound = _error("webhook-not-found", "No such webhook", HTTPStatus.NOT_FOUND)
 # Request shape.
 InvalidRequest = _error("invalid-request", "Invalid request", HTTPStatus.UNPROCESSABLE_ENTITY)
 InvalidCursor = _error("invalid-cursor", "Invalid pagination cursor", HTTPStatus.BAD_REQUEST)
@@ -91,6 +92,9 @@ InvalidConfig = _error(
 )
 MethodNotAllowed = _error("method-not-allowed", "Method not allowed", HTTPStatus.METHOD_NOT_ALLOWED)
 Conflict = _error("conflict", "Conflicting request", HTTPStatus.CONFLICT)
+OverrideConflict = _error(
+    "override-conflict", "The override does not apply to this result", HTTPStatus.CONFLICT
+)
 # Uploads.
 EmptyUpload = _error("empty-upload", "Empty upload", HTTPStatus.BAD_REQUEST)
 ContentLengthMismatch = _error(

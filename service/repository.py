@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import uuid
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
@@ -18,7 +19,9 @@ from sqlalchemy import case, func, select, true, tuple_, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session, aliased
 
+from service import outbox
 from service.models import (
+    EventType,
     LidarExtrinsic,
     Result,
     Robot,
@@ -52,6 +55,10 @@ class RunFinishedError(RepositoryError):
 
 class InvalidResultError(RepositoryError, ValueError):
     """The result document does not follow the `result.json` contract."""
+
+
+class OverrideConflictError(RepositoryError):
+    """The override would change nothing (accepting an accepted result, ...) or cannot be used."""
 
 
 # -- robots -------------------------------------------------------------------------------------
@@ -211,6 +218,7 @@ class RunRow:
     run: RunColumns
     passed: bool | None
     metric_error_final: float | None
+    accepted: bool | None = None
 
 
 _RUN_COLUMNS = (
@@ -230,7 +238,7 @@ def list_runs(
 ) -> list[RunRow]:
     """Runs newest first, keyset-paged on (created_at, id): `after` is the last row seen."""
     stmt = (
-        select(*_RUN_COLUMNS, Result.passed, Result.metric_error_final)
+        select(*_RUN_COLUMNS, Result.passed, Result.metric_error_final, Result.accepted)
         .outerjoin(Result, Result.run_id == Run.id)
         .order_by(Run.created_at.desc(), Run.id.desc())
         .limit(limit)
@@ -254,10 +262,21 @@ def list_runs(
             RunColumns(id_, robot_id, kind, status, attempts, created, started, finished),
             passed,
             final,
+            accepted,
         )
-        for id_, robot_id, kind, status, attempts, created, started, finished, passed, final in (
-            session.connection().execute(stmt).all()
-        )
+        for (
+            id_,
+            robot_id,
+            kind,
+            status,
+            attempts,
+            created,
+            started,
+            finished,
+            passed,
+            final,
+            accepted,
+        ) in session.connection().execute(stmt).all()
     ]
 
 
@@ -303,6 +322,7 @@ def store_result(
         robot_id=run.robot_id,
         document=document,
         passed=passed,
+        accepted=passed,
         metric_error_initial=parsed.metric_error.initial,
         metric_error_final=parsed.metric_error.final,
         pipeline_version=parsed.pipeline_version,
@@ -326,6 +346,7 @@ def store_result(
                 frame=frame,
                 measured_at=run.created_at,
                 passed=passed,
+                accepted=passed,
                 is_reference=frame == parsed.reference_frame,
                 tx=tx,
                 ty=ty,
@@ -338,6 +359,7 @@ def store_result(
             )
         )
     _finish(run, RunStatus.SUCCEEDED, now, error=None)
+    outbox.enqueue_events(session, run, outbox.result_events(result))
     session.flush()
     return result
 
@@ -348,6 +370,7 @@ def fail_run(
     """Mark the run `failed` with `problem`, an RFC 9457 document (`problems.problem_document`)."""
     run = _lock_run(session, run_id, lease_owner)
     _finish(run, RunStatus.FAILED, datetime.now(UTC), error=problem)
+    outbox.enqueue_events(session, run, [(EventType.RUN_FAILED, {"error": problem})])
     session.flush()
     return run
 
@@ -376,10 +399,11 @@ def _finish(run: Run, status: RunStatus, now: datetime, *, error: dict[str, Any]
 
 
 def latest_calibration(session: Session, robot_id: str) -> Result | None:
-    """The newest passed result of the robot (by upload time)."""
+    """The newest accepted result of the robot (by upload time): passed and not rejected, or
+    accepted by an operator despite its verdict."""
     return session.scalar(
         select(Result)
-        .where(Result.robot_id == robot_id, Result.passed.is_(True))
+        .where(Result.robot_id == robot_id, Result.accepted.is_(True))
         .order_by(Result.measured_at.desc(), Result.run_id.desc())
         .limit(1)
     )
@@ -394,6 +418,7 @@ class ExtrinsicPoint:
     frame: str
     measured_at: datetime
     passed: bool
+    accepted: bool
     is_reference: bool
     translation: tuple[float, float, float]
     rotation_xyzw: tuple[float, float, float, float]
@@ -407,6 +432,7 @@ _POINT_COLUMNS = (
     _E.frame,
     _E.measured_at,
     _E.passed,
+    _E.accepted,
     _E.is_reference,
     _E.tx,
     _E.ty,
@@ -419,14 +445,17 @@ _POINT_COLUMNS = (
 )
 
 
+def _point(columns: Sequence[Any]) -> ExtrinsicPoint:
+    """An `ExtrinsicPoint` from the values of `_POINT_COLUMNS`, in their order."""
+    id_, run_id, frame, at, passed, accepted, ref, tx, ty, tz, qx, qy, qz, qw, sd = columns
+    return ExtrinsicPoint(
+        id_, run_id, frame, at, passed, accepted, ref, (tx, ty, tz), (qx, qy, qz, qw), sd
+    )
+
+
 def _points(session: Session, stmt: Any) -> list[ExtrinsicPoint]:
-    return [
-        ExtrinsicPoint(id_, run_id, frame, at, passed, ref, (tx, ty, tz), (qx, qy, qz, qw), sd)
-        for id_, run_id, frame, at, passed, ref, tx, ty, tz, qx, qy, qz, qw, sd in (
-            # Columns only: the Core connection skips the ORM's row loading, a third of the cost.
-            session.connection().execute(stmt).all()
-        )
-    ]
+    # Columns only: the Core connection skips the ORM's row loading, a third of the cost.
+    return [_point(row) for row in session.connection().execute(stmt).all()]
 
 
 def extrinsics_of(session: Session, run_id: uuid.UUID) -> list[ExtrinsicPoint]:
@@ -440,6 +469,7 @@ def history(
     frame: str | None,
     passed: bool | None,
     since: datetime | None,
+    accepted: bool | None = None,
     until: datetime | None,
     limit: int,
     after: tuple[datetime, int] | None,
@@ -455,6 +485,8 @@ def history(
         stmt = stmt.where(LidarExtrinsic.frame == frame)
     if passed is not None:
         stmt = stmt.where(LidarExtrinsic.passed.is_(passed))
+    if accepted is not None:
+        stmt = stmt.where(LidarExtrinsic.accepted.is_(accepted))
     if since is not None:
         stmt = stmt.where(LidarExtrinsic.measured_at >= since)
     if until is not None:
@@ -529,7 +561,7 @@ def fleet(session: Session, *, limit: int, after_id: str | None) -> FleetPage:
     )
     accepted_run_id = (
         select(newest_passed.run_id)
-        .where(newest_passed.robot_id == Robot.id, newest_passed.passed.is_(True))
+        .where(newest_passed.robot_id == Robot.id, newest_passed.accepted.is_(True))
         .order_by(newest_passed.measured_at.desc(), newest_passed.run_id.desc())
         .limit(1)
         .scalar_subquery()
@@ -678,3 +710,37 @@ def oldest_queued_at(session: Session) -> datetime | None:
         .order_by(Run.available_at)
         .limit(1)
     )
+
+
+@dataclass(frozen=True, slots=True)
+class FleetCalibrationRow:
+    """One LiDAR of a robot's calibration in use (or the robot alone, `point` None, if none)."""
+
+    robot_id: str
+    model: str | None
+    metric_error_final: float | None
+    point: ExtrinsicPoint | None
+
+
+def fleet_calibrations(session: Session) -> list[FleetCalibrationRow]:
+    """Every robot by id with the extrinsics of its newest accepted result, frame by frame."""
+    newest = aliased(Result, name="newest_accepted")
+    accepted_run_id = (
+        select(newest.run_id)
+        .where(newest.robot_id == Robot.id, newest.accepted.is_(True))
+        .order_by(newest.measured_at.desc(), newest.run_id.desc())
+        .limit(1)
+        .scalar_subquery()
+    )
+    stmt = (
+        select(Robot.id, Robot.model, Result.metric_error_final, *_POINT_COLUMNS)
+        .select_from(Robot)
+        .outerjoin(Result, Result.run_id == accepted_run_id)
+        .outerjoin(LidarExtrinsic, LidarExtrinsic.run_id == Result.run_id)
+        .order_by(Robot.id, LidarExtrinsic.frame)
+    )
+    rows = []
+    for robot_id, model, final, *point in session.connection().execute(stmt).all():
+        extrinsic = None if point[0] is None else _point(point)
+        rows.append(FleetCalibrationRow(robot_id, model, final, extrinsic))
+    return rows

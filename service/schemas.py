@@ -8,17 +8,19 @@ from datetime import datetime
 from typing import Annotated, Any
 
 from pydantic import (
+    AnyUrl,
     BaseModel,
     ConfigDict,
     Field,
     JsonValue,
     StrictBool,
     StrictFloat,
+    UrlConstraints,
     model_validator,
 )
 
 from pipeline.transforms import from_translation_xyzw
-from service.models import RunKind, RunStatus
+from service.models import DeliveryStatus, EventType, OverrideAction, RunKind, RunStatus
 from service.parameters import PlainText
 from service.problems import Problem
 
@@ -80,6 +82,27 @@ class RunSummary(BaseModel):
     finished_at: datetime | None
     passed: bool | None = Field(description="The verdict, once a result exists.")
     metric_error_final: float | None = Field(description="Metres, once a result exists.")
+    accepted: bool | None = Field(
+        default=None,
+        description="Whether the result is in use: its verdict, unless an operator accepted or "
+        "rejected it (see `overrides`).",
+    )
+
+
+class OverrideIn(_Strict):
+    reason: PlainText = Field(
+        min_length=1, max_length=1000, description="Why: kept in the audit trail."
+    )
+
+
+class OverridePublic(BaseModel):
+    """An operator's accept or reject of a result: who, when and why."""
+
+    action: OverrideAction
+    reason: str
+    key_id: str = Field(description="The API key that made it.")
+    key_name: str | None
+    created_at: datetime
 
 
 class RunPublic(RunSummary):
@@ -95,6 +118,9 @@ class RunPublic(RunSummary):
     )
     result: dict[str, JsonValue] | None = Field(description="The run's result.json document.")
     error: Problem | None = Field(description="Why the run failed (a problem document).")
+    overrides: list[OverridePublic] = Field(
+        default_factory=list, description="Accepts and rejects of the result, oldest first."
+    )
 
 
 class RunPage(BaseModel):
@@ -163,6 +189,7 @@ class HistoryPoint(BaseModel):
     frame: str
     measured_at: datetime
     passed: bool
+    accepted: bool = Field(description="In use: the verdict unless an operator overrode it.")
     is_reference: bool
     translation: Vector3
     rotation_xyzw: Quaternion
@@ -174,6 +201,96 @@ class HistoryPage(BaseModel):
 
     robot_id: str
     items: list[HistoryPoint]
+    next_cursor: str | None
+
+
+class ComparedRun(BaseModel):
+    run_id: uuid.UUID
+    measured_at: datetime
+    passed: bool
+    accepted: bool
+
+
+class LidarChange(BaseModel):
+    """How one LiDAR's `T_base_lidar` changed from the first run to the second."""
+
+    translation_m: float | None = Field(description="Distance between the two positions.")
+    rotation_deg: float | None = Field(description="Angle of the relative rotation.")
+    delta_translation: Vector3 | None = Field(
+        description="Second translation minus first, in the base frame (m)."
+    )
+    in_from: bool = Field(description="The first run calibrated this LiDAR.")
+    in_to: bool = Field(description="The second run calibrated this LiDAR.")
+
+
+class RunComparison(BaseModel):
+    robot_id: str
+    from_run: ComparedRun
+    to_run: ComparedRun
+    lidars: dict[str, LidarChange]
+
+
+# -- webhooks -------------------------------------------------------------------------------------
+
+
+WebhookUrl = Annotated[AnyUrl, UrlConstraints(max_length=2048, allowed_schemes=["http", "https"])]
+
+
+class WebhookIn(_Strict):
+    url: WebhookUrl = Field(description="Where deliveries are POSTed (http or https).")
+    events: list[EventType] = Field(min_length=1, description="What to be told about.")
+    robot_model: str | None = Field(
+        default=None, pattern=NAME_PATTERN, description="Only robots of this model; all if unset."
+    )
+    secret: str | None = Field(
+        default=None,
+        min_length=16,
+        max_length=128,
+        pattern=r"^[\x21-\x7e]+$",
+        description="Signing secret; one is made if unset. Shown only in this response.",
+    )
+
+
+class WebhookPublic(BaseModel):
+    id: uuid.UUID
+    url: str
+    events: list[EventType]
+    robot_model: str | None
+    created_at: datetime
+
+
+class WebhookCreated(WebhookPublic):
+    secret: str = Field(
+        description="Verify each delivery's `X-Fleetcal-Signature: sha256=<hex>`, the "
+        "HMAC-SHA256 of the body with this secret. Not shown again."
+    )
+
+
+class WebhookPage(BaseModel):
+    items: list[WebhookPublic]
+
+
+class DeliveryPublic(BaseModel):
+    """One event sent (or being sent) to one webhook, and the outcome of its last try."""
+
+    id: uuid.UUID
+    event_id: uuid.UUID = Field(description="`X-Fleetcal-Event-Id`: drop repeats by it.")
+    event: EventType
+    run_id: uuid.UUID | None
+    robot_id: str
+    status: DeliveryStatus
+    attempts: int
+    max_attempts: int
+    available_at: datetime = Field(description="When the next try is due (pending).")
+    last_status_code: int | None = Field(description="The receiver's last HTTP status.")
+    last_error: str | None
+    created_at: datetime
+    delivered_at: datetime | None
+    payload: dict[str, JsonValue] = Field(description="The body sent.")
+
+
+class DeliveryPage(BaseModel):
+    items: list[DeliveryPublic]
     next_cursor: str | None
 
 

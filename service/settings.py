@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Annotated
 from urllib.parse import urlsplit
 
-from pydantic import Field, PositiveInt, ValidationInfo, field_validator
+from pydantic import Field, PositiveFloat, PositiveInt, ValidationInfo, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 DEFAULT_DATA_DIR = Path(".fleetcal")
@@ -70,6 +70,19 @@ class Settings(BaseSettings):
     )
     run_lease_seconds: PositiveInt = Field(
         default=60, description="How long a worker's claim on a run lasts without a heartbeat."
+    )
+    webhook_timeout_seconds: PositiveFloat = Field(
+        default=10.0, description="How long a webhook receiver may take to answer a delivery."
+    )
+    webhook_backoff_seconds: PositiveFloat = Field(
+        default=2.0,
+        description="Wait before a failed webhook delivery's second try; it doubles each try "
+        "(up to 30 min).",
+    )
+    webhook_lease_seconds: PositiveInt = Field(
+        default=120,
+        description="How long a worker holds a webhook delivery it is sending; one killed "
+        "meanwhile leaves it to be sent again after this.",
     )
     sqlite_busy_timeout_ms: PositiveInt = Field(
         default=30_000, description="How long a SQLite writer waits for the lock before failing."

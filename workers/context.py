@@ -82,13 +82,14 @@ def load_context(session: Session, claim: Claim) -> RunContext:
 
 
 def _last_accepted(session: Session, claim: Claim, limits: dict[str, Any]) -> Reference | None:
-    """The robot's newest passed calibration recorded before this run's upload: a retried or
-    late run compares with what was accepted before it, not with a newer run."""
+    """The robot's newest accepted calibration (passed, or accepted by an operator, and not
+    rejected) recorded before this run's upload: a retried or late run compares with what was
+    accepted before it, not with a newer run."""
     result = session.scalar(
         select(Result)
         .where(
             Result.robot_id == claim.robot_id,
-            Result.passed.is_(True),
+            Result.accepted.is_(True),
             Result.measured_at < claim.created_at,
             Result.run_id != claim.run_id,
         )

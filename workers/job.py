@@ -63,6 +63,23 @@ _STAGE_PROGRESS = {
     "drift": 0.98,
     "report": 0.99,
 }
+ITERATION_HALF_LIFE = 10
+"""Iterations after which half of the optimisation's share of the progress bar is shown. The
+optimisation stops when it converges, which it does long before `max_iterations` (200) on a good
+recording, so progress by `k / max_iterations` would crawl, then jump; `1 - 2^(-k / 10)` moves
+at every iteration and never claims the end early."""
+REPORT_INTERVAL_S = 0.5
+"""At most this often per run: each report is a database write in the worker."""
+
+
+def optimisation_progress(iteration: int, max_iterations: int) -> float:
+    """Where a run is after `iteration` of the optimisation, between its stage and the next."""
+    start, end = _STAGE_PROGRESS["optimisation"], _STAGE_PROGRESS["metric"]
+    if iteration >= max_iterations:
+        return end
+    return start + (end - start) * (1 - 0.5 ** (iteration / ITERATION_HALF_LIFE))
+
+
 # The tolerance profile's limits that are the pipeline verdict's own (`VerdictConfig`); the drift
 # and design limits are checked here, after the pipeline (`workers.drift`).
 _VERDICT_LIMITS = ("max_metric_error_m", "max_translation_stddev_m", "max_rotation_stddev_deg")
@@ -112,6 +129,15 @@ def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
         if index + 1 < len(STAGES):
             stage(STAGES[index + 1])
 
+    last_report = [0.0]
+
+    def iteration(done: int, max_iterations: int) -> None:
+        now = time.monotonic()
+        if now - last_report[0] >= REPORT_INTERVAL_S:
+            last_report[0] = now
+            reached[0] = optimisation_progress(done, max_iterations)
+            report("optimisation", reached[0])
+
     config = pipeline_config_for(spec.config, spec.context.limits)
     with tempfile.TemporaryDirectory(prefix="fleetcal-run-") as scratch:
         stage("download")
@@ -129,7 +155,7 @@ def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
         read_seconds = time.perf_counter() - started
 
     stage(STAGES[0])
-    result = calibrate(problem, config, progress=after)
+    result = calibrate(problem, config, progress=after, on_iteration=iteration)
     document = result_document(result, read_seconds=read_seconds)
     document["stages"] = {"download": {"seconds": download_seconds}, **document["stages"]}
     document["tolerance_profile"] = spec.context.profile

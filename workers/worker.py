@@ -1,6 +1,6 @@
 """The worker: claims runs from the queue into a pool of pipeline processes, keeps their leases
-alive by heartbeat, reaps runs abandoned by dead workers, and records each attempt's outcome
-through the retry policy.
+alive by heartbeat, reaps runs abandoned by dead workers, records each attempt's outcome
+through the retry policy, and sends the webhook deliveries of the outbox (`workers.webhooks`).
 
 One thread loops over claims and the children's messages; a second one only renews leases, so a
 slow database write in the loop never lets a lease lapse. `request_stop()` drains: no new claims,
@@ -30,6 +30,7 @@ from workers.context import JobSpec, load_context
 from workers.policy import Failure, FailureKind, RetryPolicy, classify, decide
 from workers.pool import Broken, Done, Failed, Pool, PoolError, Slot, Stage, death_message
 from workers.queue import Claim
+from workers.webhooks import DeliveryOptions, delivery_loop
 
 log = logging.getLogger(__name__)
 
@@ -109,6 +110,14 @@ class Worker:
         pool = Pool(self.options.concurrency, self.options.job)
         heartbeat = threading.Thread(target=self._heartbeat, name="fleetcal-heartbeat", daemon=True)
         heartbeat.start()
+        # Webhooks go out from their own thread: a slow receiver never delays claims or leases.
+        webhooks = threading.Thread(
+            target=delivery_loop,
+            args=(self.db, self.id, DeliveryOptions.from_settings(self.settings), self._stopped),
+            name="fleetcal-webhooks",
+            daemon=True,
+        )
+        webhooks.start()
         next_reap = 0.0
         try:
             while not self._stop_now.is_set():
@@ -139,6 +148,7 @@ class Worker:
             for held in unfinished:
                 self._give_back(held)
             heartbeat.join(timeout=5)
+            webhooks.join(timeout=self.settings.webhook_timeout_seconds + 5)
             if self._own_db:
                 self.db.dispose()
             log.info("worker %s stopped", self.id)

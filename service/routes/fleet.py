@@ -37,7 +37,8 @@ class AcceptedCalibration(BaseModel):
 class FleetRobot(RobotPublic):
     latest_run: RunSummary | None
     latest_calibration: AcceptedCalibration | None = Field(
-        description="The newest run that passed: the calibration the robot should be using."
+        description="The newest accepted run (passed, or accepted by an operator, and not "
+        "rejected): the calibration the robot should be using."
     )
 
 

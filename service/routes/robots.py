@@ -66,7 +66,9 @@ def get_robot(robot_id: RobotIdPath, principal: CurrentKey, session: SessionDep)
     return RobotDetail(
         **robot_public(robot).model_dump(),
         tolerance_profile=profile.name if profile else None,
-        latest_run=run_summary(latest.run, latest.passed, latest.metric_error_final)
+        latest_run=run_summary(
+            latest.run, latest.passed, latest.metric_error_final, latest.accepted
+        )
         if latest
         else None,
     )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import uuid
+from collections.abc import Sequence
 from typing import Annotated
 
 import anyio
@@ -10,9 +11,9 @@ from anyio import to_thread
 from fastapi import APIRouter, Header, Query, Request, Response
 from sqlalchemy.exc import IntegrityError
 
-from service import repository
+from service import overrides, repository
 from service.deps import CurrentKey, ReadKey, RobotIdPath, Services, ServicesDep, SessionDep
-from service.models import Result, Run, RunKind, RunStatus
+from service.models import Override, Result, Run, RunKind, RunStatus
 from service.pagination import (
     PAGE_SIZE_DEFAULT,
     PAGE_SIZE_MAX,
@@ -33,7 +34,14 @@ from service.problems import (
     RunNotFound,
 )
 from service.run_config import parse_run_config
-from service.schemas import ROBOT_ID_PATTERN, RunPage, RunPublic, RunSummary, UploadInfo
+from service.schemas import (
+    ROBOT_ID_PATTERN,
+    OverridePublic,
+    RunPage,
+    RunPublic,
+    RunSummary,
+    UploadInfo,
+)
 from service.uploads import stream_to_storage
 
 router = APIRouter(prefix="/v1", tags=["runs"], responses=PROBLEM_RESPONSES)
@@ -168,7 +176,7 @@ def get_run(run_id: uuid.UUID, principal: CurrentKey, session: SessionDep) -> Ru
     run, result = found
     if not principal.may_read_robot(run.robot_id):
         raise Forbidden("this key may not read this robot's runs")
-    return run_public(run, result)
+    return run_public(run, result, overrides.overrides_of(session, [run.id])[run.id])
 
 
 @router.get("/runs", summary="Runs, newest first, cursor-paginated")
@@ -194,7 +202,10 @@ def list_runs(
         robot_id=robot_id, status=status, kind=kind, passed=passed, since=since, until=until
     )
     rows = repository.list_runs(session, where, limit=limit + 1, after=after)
-    items = [run_summary(row.run, row.passed, row.metric_error_final) for row in rows[:limit]]
+    items = [
+        run_summary(row.run, row.passed, row.metric_error_final, row.accepted)
+        for row in rows[:limit]
+    ]
     next_cursor = None
     if len(rows) > limit:
         last = rows[limit - 1].run
@@ -206,7 +217,10 @@ def list_runs(
 
 
 def run_summary(
-    run: Run | repository.RunColumns, passed: bool | None, metric_error_final: float | None
+    run: Run | repository.RunColumns,
+    passed: bool | None,
+    metric_error_final: float | None,
+    accepted: bool | None = None,
 ) -> RunSummary:
     return RunSummary(
         id=run.id,
@@ -219,12 +233,16 @@ def run_summary(
         finished_at=run.finished_at,
         passed=passed,
         metric_error_final=metric_error_final,
+        accepted=accepted,
     )
 
 
-def run_public(run: Run, result: Result | None) -> RunPublic:
+def run_public(run: Run, result: Result | None, audit: Sequence[Override] = ()) -> RunPublic:
     summary = run_summary(
-        run, result.passed if result else None, result.metric_error_final if result else None
+        run,
+        result.passed if result else None,
+        result.metric_error_final if result else None,
+        result.accepted if result else None,
     )
     return RunPublic(
         **summary.model_dump(),
@@ -236,6 +254,7 @@ def run_public(run: Run, result: Result | None) -> RunPublic:
         config=run.config,
         result=result.document if result else None,
         error=Problem.model_validate(run.error) if run.error else None,
+        overrides=[OverridePublic.model_validate(row, from_attributes=True) for row in audit],
     )
 
 

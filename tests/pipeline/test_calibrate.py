@@ -183,3 +183,13 @@ def test_stage_1_takes_each_lidars_optical_axis_from_the_config() -> None:
     assert abs(FLOOR_PLANE[:3] @ side + FLOOR_PLANE[3]) < 1e-9
     axis = np.array([1.0, 0.2, 0.0])
     np.testing.assert_allclose(side / np.linalg.norm(side), axis / np.linalg.norm(axis))
+
+
+def test_each_optimisation_iteration_is_reported() -> None:
+    seen: list[tuple[int, int]] = []
+    result = calibrate(box_problem()[0], on_iteration=lambda k, n: seen.append((k, n)))
+    iterations = result.stages["optimisation"].details["iterations"]
+    assert isinstance(iterations, int) and iterations > 1
+    assert seen == [
+        (k, PipelineConfig().optimisation.max_iterations) for k in range(1, iterations + 1)
+    ]

@@ -22,7 +22,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from sqlalchemy import select
 
-from service.models import Result
+from service import webhooks
+from service.models import EventType, Result
 from service.pagination import encode_cursor
 from tests.reliability.test_fuzz_api import seed
 from tests.service.conftest import Api, recording
@@ -185,7 +186,16 @@ def valid_path_values(api: Api) -> dict[tuple[str, str], str]:
     with api.services.db.session() as session:
         run_id = session.scalars(select(Result.run_id)).first()
     assert run_id is not None, "seed() stores a result"
+    with api.services.db.transaction() as session:
+        hook = webhooks.create_webhook(
+            session,
+            url="http://127.0.0.1:9/hook",
+            events=list(EventType),
+            robot_model=None,
+            secret=None,
+        )
     return {
+        ("*", "webhook_id"): str(hook.id),
         ("*", "robot_id"): "R1",
         ("*", "run_id"): str(run_id),
         ("/v1/tolerance-profiles/{name}", "name"): "p1",

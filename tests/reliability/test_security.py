@@ -53,7 +53,26 @@ def extra_matrix(runs: dict[str, str]) -> list[tuple[str, str, object, set[str]]
             ("GET", f"/v1/runs/{run}/report/map-top.png", None, allowed),
             ("GET", f"/v1/runs/{run}/exports/tf-static", None, allowed),
             ("GET", f"/v1/runs/{run}/exports/recording", None, allowed),
+            ("GET", f"/v1/robots/{robot}/compare?from={run}&to={run}", None, allowed),
+            ("GET", f"/v1/robots/{robot}/history.csv", None, allowed),
+            # The override scope (admin implies it); no key of the matrix has it alone.
+            ("POST", f"/v1/runs/{run}/reject", {"reason": "matrix"}, {"admin"}),
+            ("POST", f"/v1/runs/{run}/accept", {"reason": "matrix"}, {"admin"}),
         ]
+    hook = f"/v1/webhooks/{uuid.UUID(int=1)}"  # unknown: the admin's answer is a 404
+    rows += [
+        ("GET", "/v1/fleet/calibrations.csv", None, {"admin", "read"}),
+        (
+            "POST",
+            "/v1/webhooks",
+            {"url": "http://127.0.0.1:9/", "events": ["run.failed"]},
+            {"admin"},
+        ),
+        ("GET", "/v1/webhooks", None, {"admin"}),
+        ("GET", hook, None, {"admin"}),
+        ("GET", f"{hook}/deliveries", None, {"admin"}),
+        ("DELETE", hook, None, {"admin"}),
+    ]
     return rows
 
 

@@ -179,6 +179,7 @@ def make_keys(db: Database) -> dict[str, str]:
         keys = {
             "admin": create_key(session, [Scope.ADMIN]),
             "read": create_key(session, [Scope.READ]),
+            "override": create_key(session, [Scope.OVERRIDE], name="line-lead"),
             "upload": create_key(session, [Scope.UPLOAD]),
             "upload_r1": create_key(session, [Scope.UPLOAD], robot_id="R1"),
             "revoked": create_key(session, [Scope.ADMIN]),

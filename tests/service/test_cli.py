@@ -83,7 +83,7 @@ def test_db_upgrade_and_current(tmp_path: Path) -> None:
     assert code == 1
     code, out, err = _fleetcal("db", "upgrade", "--data-dir", str(tmp_path))
     assert code == 0, err
-    assert "at revision 0001" in out and (tmp_path / "fleetcal.db").is_file()
+    assert "at revision 0002" in out and (tmp_path / "fleetcal.db").is_file()
     code, out, _ = _fleetcal("db", "current", "--data-dir", str(tmp_path))
     assert code == 0 and "up to date" in out
 

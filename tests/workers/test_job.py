@@ -3,6 +3,7 @@ tolerance profile; an upload cannot set (loosen) its own verdict."""
 
 from __future__ import annotations
 
+import itertools
 import tarfile
 import tempfile
 from pathlib import Path
@@ -76,3 +77,16 @@ def test_the_uploaded_recording_replaces_its_scratch_path(tmp_path: Path) -> Non
         UnknownFormatError(f"{recording} holds no recording; archive the bag directory"), recording
     )
     assert str(err) == "the uploaded recording holds no recording; archive the bag directory"
+
+
+def test_optimisation_progress_moves_at_every_iteration_and_stays_in_its_stage() -> None:
+    from workers.job import _STAGE_PROGRESS, optimisation_progress
+
+    values = [optimisation_progress(k, 200) for k in range(0, 201)]
+    assert values[0] == _STAGE_PROGRESS["optimisation"]
+    assert all(b > a for a, b in itertools.pairwise(values))
+    assert values[-1] == _STAGE_PROGRESS["metric"]
+    # A typical run converges in tens of iterations: by then most of the stage's share is shown.
+    assert values[30] > _STAGE_PROGRESS["optimisation"] + 0.8 * (
+        _STAGE_PROGRESS["metric"] - _STAGE_PROGRESS["optimisation"]
+    )

@@ -1,0 +1,63 @@
+"""CSV exports, on both databases, read back with the standard library's csv reader: a robot's
+history and the fleet's calibrations in use."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+from tests.service.conftest import Api, problem_type
+from tests.service.routes.accepted import determined, finished
+
+
+def _rows(text: str) -> list[dict[str, str]]:
+    return list(csv.DictReader(io.StringIO(text)))
+
+
+def test_history_csv_has_a_row_per_lidar_and_run(api: Api) -> None:
+    first = finished(api, determined())
+    second = finished(api, determined(passed=False, rear_x=-0.45))
+    response = api.client.get("/v1/robots/R1/history.csv", headers=api.headers("read"))
+    assert response.status_code == 200 and response.headers["content-type"].startswith("text/csv")
+    assert 'filename="R1-history.csv"' in response.headers["content-disposition"]
+    rows = _rows(response.text)
+    assert [(r["run_id"], r["frame"], r["passed"], r["accepted"]) for r in rows] == [
+        (first, "lidar_front", "True", "True"),
+        (first, "lidar_rear", "True", "True"),
+        (second, "lidar_front", "False", "False"),
+        (second, "lidar_rear", "False", "False"),
+    ]
+    assert float(rows[3]["tx"]) == -0.45 and float(rows[3]["qw"]) == 0.0009
+    accepted = _rows(
+        api.client.get("/v1/robots/R1/history.csv?accepted=true", headers=api.headers("read")).text
+    )
+    assert {r["run_id"] for r in accepted} == {first}
+
+
+def test_fleet_csv_holds_each_robots_calibration_in_use(api: Api) -> None:
+    r1 = finished(api, determined())
+    finished(api, determined(passed=False), robot="R2")
+    api.client.put("/v1/robots/R3", json={"model": "amr"}, headers=api.headers("admin"))
+    response = api.client.get("/v1/fleet/calibrations.csv", headers=api.headers("read"))
+    assert response.status_code == 200, response.text
+    rows = _rows(response.text)
+    assert [(r["robot_id"], r["run_id"], r["frame"]) for r in rows] == [
+        ("R1", r1, "lidar_front"),
+        ("R1", r1, "lidar_rear"),
+        ("R2", "", ""),
+        ("R3", "", ""),
+    ]
+    assert rows[3]["model"] == "amr" and float(rows[1]["tx"]) == -0.41
+
+
+def test_csv_errors_are_problems(api: Api) -> None:
+    cases = [
+        ("/v1/robots/nobody/history.csv", "read", 404, "robot-not-found"),
+        ("/v1/robots/R1/history.csv?since=yesterday", "read", 422, "invalid-request"),
+        ("/v1/robots/R2/history.csv", "upload_r1", 403, "forbidden"),
+        ("/v1/fleet/calibrations.csv", "upload_r1", 403, "forbidden"),
+    ]
+    finished(api, determined(), robot="R2")
+    for path, key, status, slug in cases:
+        response = api.client.get(path, headers=api.headers(key))
+        assert (response.status_code, problem_type(response)) == (status, slug), path
