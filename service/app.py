@@ -44,7 +44,8 @@ log = logging.getLogger(__name__)
 DESCRIPTION = """\
 Upload LiDAR calibration recordings, follow their runs, and query each robot's calibration and
 its history. Authenticate with an API key (`X-API-Key: <key>` or `Authorization: Bearer <key>`);
-keys have scopes `upload` (optionally bound to one robot), `read` and `admin`.
+keys have scopes `upload` (optionally bound to one robot), `read`, `override` (accept or reject a
+verdict) and `admin` (everything).
 Every error is an RFC 9457 problem document (`application/problem+json`).
 """
 

@@ -130,11 +130,15 @@ def get_history(
     principal: CurrentKey,
     session: SessionDep,
     frame: FrameQuery = None,
-    passed: Annotated[bool | None, Query(description="true: accepted calibrations only.")] = None,
+    passed: Annotated[bool | None, Query(description="true: passed verdicts only.")] = None,
     since: SinceQuery = None,
     until: UntilQuery = None,
     limit: Annotated[int, Query(ge=1, le=HISTORY_LIMIT_MAX)] = HISTORY_LIMIT_DEFAULT,
     cursor: CursorQuery = None,
+    accepted: Annotated[
+        bool | None,
+        Query(description="true: calibrations in use only (verdicts as operators overrode them)."),
+    ] = None,
 ) -> HistoryPage:
     _check_readable(principal, robot_id)
     after = None
@@ -146,6 +150,7 @@ def get_history(
         robot_id,
         frame=frame,
         passed=passed,
+        accepted=accepted,
         since=since,
         until=until,
         limit=limit + 1,

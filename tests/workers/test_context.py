@@ -5,10 +5,11 @@ from __future__ import annotations
 
 from datetime import timedelta
 
-from service import repository
+from service import overrides, repository
 from service.db import Database
-from service.models import RunKind
+from service.models import OverrideAction, RunKind
 from tests.service.documents import result_document
+from tests.service.routes.accepted import determined
 from tests.workers.runs import enqueue, finished_run
 from workers import queue
 from workers.context import RunContext, load_context
@@ -72,3 +73,20 @@ def test_without_profile_or_history_there_is_nothing_to_compare(db: Database) ->
     enqueue(db, kind=RunKind.MAINTENANCE)
     context = context_of_next_claim(db)
     assert context.profile is None and context.limits == {} and context.reference is None
+
+
+def test_the_drift_reference_follows_operators_overrides(db: Database) -> None:
+    set_up_profile(db)
+    older = finished_run(db, determined(), kind=RunKind.MAINTENANCE)
+    newer = finished_run(db, determined(), kind=RunKind.MAINTENANCE)
+    failed = finished_run(db, determined(passed=False), kind=RunKind.MAINTENANCE)
+    with db.transaction() as session:
+        overrides.override(session, newer, OverrideAction.REJECT, reason="door open", key_id="k")
+    enqueue(db, kind=RunKind.MAINTENANCE)
+    reference = context_of_next_claim(db).reference
+    assert reference is not None and reference.run_id == str(older), "the rejected one is skipped"
+    with db.transaction() as session:
+        overrides.override(session, failed, OverrideAction.ACCEPT, reason="checked", key_id="k")
+    enqueue(db, kind=RunKind.MAINTENANCE)
+    reference = context_of_next_claim(db).reference
+    assert reference is not None and reference.run_id == str(failed), "accepted: in use"

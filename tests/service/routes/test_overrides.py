@@ -58,6 +58,10 @@ def test_rejecting_a_passed_run_falls_back_to_the_previous_one(api: Api) -> None
     assert _calibration_run(api) == first
     runs = api.client.get("/v1/runs?robot_id=R1", headers=api.headers("read")).json()["items"]
     assert [(r["id"], r["accepted"]) for r in runs] == [(second, False), (first, True)]
+    in_use = api.client.get("/v1/robots/R1/history?accepted=true", headers=api.headers("read"))
+    assert {p["run_id"] for p in in_use.json()["items"]} == {first}
+    by_verdict = api.client.get("/v1/robots/R1/history?passed=true", headers=api.headers("read"))
+    assert {p["run_id"] for p in by_verdict.json()["items"]} == {first, second}
     # And back again: the trail keeps both.
     again = api.client.post(
         f"/v1/runs/{second}/accept",
