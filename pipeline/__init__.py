@@ -6,11 +6,11 @@ Importable without the service: it never imports FastAPI, SQLAlchemy or the serv
 from typing import TYPE_CHECKING, Any
 
 from pipeline.errors import BadInputError, ConfigError, PipelineError
-from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, ScanPattern, Stop
 
 if TYPE_CHECKING:
     from pipeline.calibrate import CalibrationResult, calibrate
     from pipeline.config import PipelineConfig
+    from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, ScanPattern, Stop
 
 __version__ = "0.1.0"
 
@@ -29,9 +29,14 @@ __all__ = [
     "calibrate",
 ]
 
-# The calibration entry points load numpy, scipy and the kd-tree: only when first used, so that
-# `import pipeline` (and `fleetcal --help`) stays instant.
+# The problem records and the calibration entry points load numpy, scipy and the kd-tree: only
+# when first used, so that `import pipeline` (and `fleetcal --help`) stays instant.
 _LAZY = {
+    "CalibrationProblem": "pipeline.problem",
+    "LidarInfo": "pipeline.problem",
+    "RecordingInfo": "pipeline.problem",
+    "ScanPattern": "pipeline.problem",
+    "Stop": "pipeline.problem",
     "calibrate": "pipeline.calibrate",
     "CalibrationResult": "pipeline.calibrate",
     "PipelineConfig": "pipeline.config",

@@ -12,14 +12,15 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from pipeline.errors import BadInputError
-from pipeline.transforms import Matrix4, from_translation_xyzw
+
+if TYPE_CHECKING:
+    from pipeline.transforms import Matrix4
 
 # A result's quaternions are unit to ~1e-12; one further off is a damaged document.
 _UNIT_TOLERANCE = 1e-6
@@ -67,11 +68,16 @@ class Extrinsic:
 
     def matrix(self) -> Matrix4:
         """(4, 4) `T_parent_child`."""
+        # scipy (through pipeline.transforms) only here: `fleetcal --help` imports this module.
+        from pipeline.transforms import from_translation_xyzw
+
         return from_translation_xyzw(self.translation, self.rotation_xyzw)
 
     @property
     def rpy(self) -> tuple[float, float, float]:
         """Fixed-axis roll, pitch, yaw in radians (URDF's `rpy`)."""
+        from scipy.spatial.transform import Rotation
+
         roll, pitch, yaw = Rotation.from_quat(self.rotation_xyzw).as_euler("xyz")
         return float(roll), float(pitch), float(yaw)
 

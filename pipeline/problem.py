@@ -10,11 +10,15 @@ from __future__ import annotations
 import enum
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.transforms import Matrix4
+if TYPE_CHECKING:
+    # Only the type alias: importing pipeline.transforms would load scipy with every
+    # `import pipeline` (and `fleetcal --help`).
+    from pipeline.transforms import Matrix4
 
 
 class ScanPattern(enum.StrEnum):

@@ -21,6 +21,7 @@ from pipeline.report import (
     convergence_note,
     figures,
     floor_height,
+    grid_counts,
     lidar_colour,
     map_extent,
     map_poses,
@@ -271,3 +272,21 @@ def test_the_error_curve_ends_at_the_reported_metric_or_says_why_not(
     unmeasured = replace(truth_input, metric_error_final=float("nan"))
     assert "no metric error was measured" in (convergence_note(unmeasured) or "")
     assert convergence_note(replace(truth_input, error_per_iteration=())) is None
+
+
+def test_grid_counts_are_histogram2d_counts_edges_and_outside_included() -> None:
+    rng = np.random.default_rng(3)
+    extent = (-1.0, 2.0, 0.5, 1.5)
+    inside = rng.uniform((-1.0, 0.5), (2.0, 1.5), size=(5000, 2))
+    edges = np.array([[-1.0, 0.5], [2.0, 1.5], [2.0, 0.5], [-1.0, 1.5]])
+    outside = np.array([[-1.01, 1.0], [2.01, 1.0], [0.0, 0.49], [0.0, 1.51]])
+    points = np.concatenate([inside, edges, outside])
+
+    expected, _, _ = np.histogram2d(
+        points[:, 0], points[:, 1], bins=(30, 7), range=((-1.0, 2.0), (0.5, 1.5))
+    )
+    counts = grid_counts(points, extent, cols=30, rows=7)
+
+    assert counts.shape == (30, 7)
+    assert counts.sum() == len(inside) + len(edges)
+    np.testing.assert_array_equal(counts, expected)
