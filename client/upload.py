@@ -93,7 +93,7 @@ def wait_for_run(
     deadline = time.monotonic() + timeout_s
     last: tuple[Any, ...] = ()
     while True:
-        run = api.json("GET", f"/v1/runs/{run_id}")
+        run: dict[str, Any] = api.json("GET", f"/v1/runs/{run_id}")
         now = (run.get("status"), run.get("stage"), run.get("progress"))
         if now != last:
             last = now
