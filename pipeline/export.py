@@ -1,5 +1,6 @@
 """A calibration result in the robot's configuration: `result.json` -> ROS 2 launch YAML of
-`static_transform_publisher` nodes, a URDF snippet of fixed joints, or `extrinsics.yaml`.
+`static_transform_publisher` nodes, a URDF snippet of fixed joints, `extrinsics.yaml`, or
+Autoware's `sensor_kit_calibration.yaml` layout.
 
 Pure functions of the result document (DESIGN.md's output contract). Numbers are written with
 `repr`, the shortest text that reads back to the same float64, so every export round-trips.
@@ -34,6 +35,7 @@ class ExportFormat(enum.StrEnum):
     TF_STATIC = "tf-static"
     URDF = "urdf"
     EXTRINSICS = "extrinsics"
+    AUTOWARE = "autoware"
     RECORDING = "recording"
 
 
@@ -41,17 +43,20 @@ TEXT_FORMATS: tuple[ExportFormat, ...] = (
     ExportFormat.TF_STATIC,
     ExportFormat.URDF,
     ExportFormat.EXTRINSICS,
+    ExportFormat.AUTOWARE,
 )
 FILE_NAMES: Mapping[ExportFormat, str] = {
     ExportFormat.TF_STATIC: "tf_static.launch.yaml",
     ExportFormat.URDF: "lidars.urdf",
     ExportFormat.EXTRINSICS: "extrinsics.yaml",
+    ExportFormat.AUTOWARE: "sensor_kit_calibration.yaml",
     ExportFormat.RECORDING: "calibrated.mcap",
 }
 MEDIA_TYPES: Mapping[ExportFormat, str] = {
     ExportFormat.TF_STATIC: "application/yaml",
     ExportFormat.URDF: "application/xml",
     ExportFormat.EXTRINSICS: "application/yaml",
+    ExportFormat.AUTOWARE: "application/yaml",
     ExportFormat.RECORDING: "application/octet-stream",
 }
 
@@ -265,13 +270,15 @@ def urdf_snippet(
 def extrinsics_yaml(
     document: Mapping[str, Any], *, allow_failed: bool = False, source: str | None = None
 ) -> str:
-    """`extrinsics.yaml`: per LiDAR its parent, child and `[x, y, z, qx, qy, qz, qw]`."""
+    """`extrinsics.yaml`: per LiDAR its parent, child, `[x, y, z, qx, qy, qz, qw]` and beside the
+    quaternion the same rotation as fixed-axis `rpy` in radians (URDF's convention)."""
     extrinsics = calibrated_extrinsics(document, allow_failed=allow_failed)
     metric = document.get("metric_error") or {}
     lines = [
         *_header(document, source, "#"),
         "# transform: T_parent_child (maps child points into parent) as "
         "[x, y, z, qx, qy, qz, qw], metres and a unit quaternion",
+        "# rpy: the same rotation as fixed-axis roll, pitch, yaw (x, then y, then z) in radians",
         f"reference_frame: {json.dumps(str(document.get('reference_frame', '')))}",
         f"passed: {'true' if document['verdict']['passed'] else 'false'}",
         f"metric_error_m: {_num(metric.get('final'))}",
@@ -285,6 +292,25 @@ def extrinsics_yaml(
             f"  - parent: {json.dumps(edge.parent)}",
             f"    child: {json.dumps(edge.child)}",
             f"    transform: [{values}]",
+            f"    rpy: [{', '.join(_num(v) for v in edge.rpy)}]",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def autoware_yaml(
+    document: Mapping[str, Any], *, allow_failed: bool = False, source: str | None = None
+) -> str:
+    """Autoware's `sensor_kit_calibration.yaml` / `sensors_calibration.yaml` layout:
+    `parent: {child: {x, y, z, roll, pitch, yaw}}`, metres and fixed-axis radians, which
+    Autoware's sensor kit xacro turns into each joint's `<origin xyz rpy>`."""
+    extrinsics = calibrated_extrinsics(document, allow_failed=allow_failed)
+    lines = [*_header(document, source, "#"), f"{json.dumps(extrinsics[0].parent)}:"]
+    for edge in extrinsics:
+        lines.append(f"  {json.dumps(edge.child)}:")
+        values = (*edge.translation, *edge.rpy)
+        lines += [
+            f"    {name}: {_num(value)}"
+            for name, value in zip(("x", "y", "z", "roll", "pitch", "yaw"), values, strict=True)
         ]
     return "\n".join(lines) + "\n"
 
@@ -296,7 +322,7 @@ def render(
     allow_failed: bool = False,
     source: str | None = None,
 ) -> str:
-    """The text export `fmt` (`tf-static`, `urdf` or `extrinsics`) of `document`."""
+    """The text export `fmt` (`tf-static`, `urdf`, `extrinsics` or `autoware`) of `document`."""
     fmt = ExportFormat(fmt)
     if fmt is ExportFormat.TF_STATIC:
         return tf_static_launch(document, allow_failed=allow_failed, source=source)
@@ -304,6 +330,8 @@ def render(
         return urdf_snippet(document, allow_failed=allow_failed, source=source)
     if fmt is ExportFormat.EXTRINSICS:
         return extrinsics_yaml(document, allow_failed=allow_failed, source=source)
+    if fmt is ExportFormat.AUTOWARE:
+        return autoware_yaml(document, allow_failed=allow_failed, source=source)
     raise ExportError(f"{fmt.value} is not a text export; use pipeline.io.retag for recordings")
 
 

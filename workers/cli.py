@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import typer
 
+from client import cli as client_cli
 from pipeline import cli as pipeline_cli
 from service import cli as service_cli
 from workers import commands as worker_commands
@@ -22,6 +23,7 @@ app = typer.Typer(
 pipeline_cli.register(app)
 service_cli.register(app)
 worker_commands.register(app)
+client_cli.register(app)
 
 
 @app.command()

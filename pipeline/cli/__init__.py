@@ -15,6 +15,7 @@ _COMMAND_MODULES: tuple[str, ...] = (
     "denoise",
     "synth",
     "export",
+    "export_map",
     "calibrate",
 )
 

@@ -38,8 +38,8 @@ def export_command(
             "--format",
             "-f",
             help="tf-static: ROS 2 launch YAML of static_transform_publisher nodes; urdf: fixed "
-            "joints base -> LiDAR; extrinsics: extrinsics.yaml; recording: the recording with "
-            "/tf_static replaced",
+            "joints base -> LiDAR; extrinsics: extrinsics.yaml; autoware: Autoware's "
+            "sensor_kit_calibration.yaml layout; recording: the recording with /tf_static replaced",
         ),
     ],
     out: Annotated[

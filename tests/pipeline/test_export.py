@@ -134,10 +134,24 @@ def parse_extrinsics(text: str) -> dict[tuple[str, str], np.ndarray]:
     return parsed
 
 
+def parse_autoware(text: str) -> dict[tuple[str, str], np.ndarray]:
+    """Autoware's layout read as its xacro does: xyz and fixed-axis rpy per parent -> child."""
+    parsed = {}
+    for parent, children in yaml.safe_load(text).items():
+        for child, v in children.items():
+            assert sorted(v) == sorted(["x", "y", "z", "roll", "pitch", "yaw"])
+            T = np.eye(4)
+            T[:3, :3] = Rotation.from_euler("xyz", [v["roll"], v["pitch"], v["yaw"]]).as_matrix()
+            T[:3, 3] = [v["x"], v["y"], v["z"]]
+            parsed[(parent, child)] = T
+    return parsed
+
+
 PARSERS = {
     ExportFormat.TF_STATIC: parse_launch,
     ExportFormat.URDF: parse_urdf,
     ExportFormat.EXTRINSICS: parse_extrinsics,
+    ExportFormat.AUTOWARE: parse_autoware,
 }
 
 
@@ -167,7 +181,7 @@ def test_every_format_round_trips_any_pose(translation: list[float], quat: list[
         lidar_other=pose(translation, rotation),
     )
     for fmt, parse in PARSERS.items():
-        if fmt is ExportFormat.URDF and math.pi / 2 - pitch < 1e-3:
+        if fmt in (ExportFormat.URDF, ExportFormat.AUTOWARE) and math.pi / 2 - pitch < 1e-3:
             continue
         assert_same(parse(render(doc, fmt)), doc)
 
@@ -200,6 +214,27 @@ def test_urdf_declares_every_link_once() -> None:
     robot = ET.fromstring(urdf_snippet(set1_document()))
     names = [link.get("name") for link in robot.iter("link")]
     assert sorted(names) == ["base_link", "lidar_front", "lidar_left", "lidar_rear"]
+
+
+def test_extrinsics_yaml_states_each_rotation_also_as_rpy() -> None:
+    for entry in yaml.safe_load(extrinsics_yaml(set1_document()))["extrinsics"]:
+        from_rpy = Rotation.from_euler("xyz", entry["rpy"])
+        from_quat = Rotation.from_quat(entry["transform"][3:])
+        assert (from_rpy.inv() * from_quat).magnitude() < TOLERANCE
+
+
+def test_autoware_yaml_is_keyed_by_the_base_then_each_lidar_frame() -> None:
+    parsed = yaml.safe_load(render(set1_document(), "autoware"))
+    assert list(parsed) == ["base_link"]
+    assert list(parsed["base_link"]) == ["lidar_front", "lidar_left", "lidar_rear"]
+
+
+def test_autoware_yaml_refuses_a_failed_verdict_unless_allowed() -> None:
+    doc = set1_document()
+    doc["verdict"]["passed"] = False
+    with pytest.raises(ExportError, match="did not pass its verdict"):
+        render(doc, ExportFormat.AUTOWARE)
+    assert "FAILED (exported anyway)" in render(doc, ExportFormat.AUTOWARE, allow_failed=True)
 
 
 def test_extrinsics_yaml_carries_the_verdict_and_provenance() -> None:
