@@ -39,6 +39,13 @@ class ExportFormat(enum.StrEnum):
     RECORDING = "recording"
 
 
+class MapFormat(enum.StrEnum):
+    """Point-cloud files of the accumulated map (`pipeline.map_export`, `fleetcal export-map`)."""
+
+    PLY = "ply"
+    PCD = "pcd"
+
+
 TEXT_FORMATS: tuple[ExportFormat, ...] = (
     ExportFormat.TF_STATIC,
     ExportFormat.URDF,

@@ -8,7 +8,6 @@ odometry's stop poses and the initial extrinsics, after with the result's refine
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,15 +17,10 @@ import numpy as np
 from matplotlib.colors import to_rgb
 from numpy.typing import NDArray
 
-from pipeline.export import ExportError, calibrated_extrinsics
+from pipeline.export import ExportError, MapFormat, calibrated_extrinsics
 from pipeline.problem import CalibrationProblem
 from pipeline.report import LIDAR_COLOURS, map_poses
 from pipeline.transforms import Matrix4, from_translation_xyzw
-
-
-class MapFormat(enum.StrEnum):
-    PLY = "ply"
-    PCD = "pcd"
 
 
 @dataclass(frozen=True)

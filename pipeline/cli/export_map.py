@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from pipeline.cli.common import progress, user_errors
-from pipeline.map_export import MapFormat
+from pipeline.export import MapFormat
 
 
 def register(app: typer.Typer) -> None:
@@ -36,7 +36,7 @@ def export_map_command(
     from pipeline.map_export import maps_before_after, write_map
 
     with user_errors():
-        document = _load(result)
+        document, _ = _load(result)
         config = PipelineConfig.model_validate(document.get("config") or {})
         problem = read_recording(recording, config.reader)
         before, after = maps_before_after(
