@@ -415,7 +415,7 @@
         runsBody.append(runTable(page.items, false));
       },
     }, "Load older runs");
-    const accepted = history.filter((p) => p.passed).at(-1);
+    const accepted = history.filter((p) => p.accepted ?? p.passed).at(-1);
     show(
       h("h1", {}, `Robot ${robot.id}`),
       h(

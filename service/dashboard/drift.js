@@ -27,8 +27,10 @@
   // (dt: mm per base-frame axis, dr: deg about the LiDAR's axes), the drift of `latest`, and
   // the failed runs left out (with the newest of them, when it is newer than `latest`).
   function ofAccepted(points) {
-    const accepted = points.filter((p) => p.passed);
-    const failed = points.filter((p) => !p.passed);
+    // In use: the verdict, unless an operator accepted or rejected the calibration.
+    const inUse = (p) => p.accepted ?? p.passed;
+    const accepted = points.filter(inUse);
+    const failed = points.filter((p) => !inUse(p));
     const base = accepted[0] || null;
     const latest = accepted.at(-1) || null;
     const changes = accepted.map((p) => ({

@@ -260,6 +260,28 @@ def test_drift_compares_accepted_calibrations_only(signed_in: Any, live_app: Liv
     assert none["latest"] is None and none["translationMm"] is None and none["failed"] == 1
 
 
+def test_drift_follows_operators_overrides(signed_in: Any, live_app: LiveApp) -> None:
+    # An operator's accept / reject decides which calibrations are in use, not the verdict.
+    browser = signed_in
+    open_page(browser, live_app.url, "/")
+    drift = browser.execute_script(
+        """
+        const p = (at, x, passed, accepted) => ({run_id: at, measured_at: at, passed, accepted,
+          translation: [x, 0, 0], rotation_xyzw: [0, 0, 0, 1]});
+        return fleetcal.drift.ofAccepted([
+          p("2024-01-01T00:00:00Z", 0.100, true, true),
+          p("2024-01-02T00:00:00Z", 0.300, true, false),
+          p("2024-01-03T00:00:00Z", 0.104, false, true)]);
+        """
+    )
+    assert round(drift["translationMm"], 6) == 4.0
+    assert [c["point"]["measured_at"][:10] for c in drift["changes"]] == [
+        "2024-01-01",
+        "2024-01-03",
+    ]
+    assert drift["failed"] == 1
+
+
 @pytest.mark.parametrize(
     ("check", "value", "limit"),
     [
