@@ -4,9 +4,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+import pipeline.calibrate
 from pipeline.calibrate import STAGES, calibrate
 from pipeline.config import PipelineConfig
 from pipeline.errors import BadInputError
+from pipeline.stages.runner import Listeners, Stage, StageOutcome
+from pipeline.stages.sequence import STAGE_SEQUENCE
+from pipeline.stages.state import CalibrationState
 from pipeline.transforms import invert, pose_difference
 from tests.pipeline.calibration_data import (
     box_calibration,
@@ -83,3 +87,42 @@ def test_each_optimisation_iteration_is_reported() -> None:
     assert seen == [
         (k, PipelineConfig().optimisation.max_iterations) for k in range(1, iterations + 1)
     ]
+
+
+def test_calibrate_runs_the_declared_sequence_and_a_stage_inserted_in_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """One place declares the stages: a stage added there runs in its place, reports once and
+    is heard once, like every other."""
+    seen: list[CalibrationState] = []
+
+    def look(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
+        seen.append(state)
+        return StageOutcome(state, {"looked": True}, "looked at the state")
+
+    sequence = (*STAGE_SEQUENCE[:3], Stage("look", look), *STAGE_SEQUENCE[3:])
+    monkeypatch.setattr(pipeline.calibrate, "STAGE_SEQUENCE", sequence)
+    heard: list[tuple[str, float, str]] = []
+    result = calibrate(
+        box_problem()[0],
+        progress=lambda stage, seconds, message: heard.append((stage, seconds, message)),
+    )
+    names = (*STAGES[:3], "look", *STAGES[3:])
+    assert tuple(result.stages) == names
+    assert [stage for stage, _, _ in heard] == list(names)
+    assert [seconds for _, seconds, _ in heard] == [
+        report.seconds for report in result.stages.values()
+    ]
+    assert heard[3][2] == "looked at the state"
+    assert result.stages["look"].details == {"looked": True}
+    # It ran after stage 3 and before stage 4, and changed nothing.
+    assert len(seen) == 1 and seen[0].floor_refinement is not None and seen[0].optimised is None
+    plain = box_calibration()
+    for lidar, plain_lidar in zip(result.lidars, plain.lidars, strict=True):
+        np.testing.assert_allclose(
+            lidar.T_base_lidar_calibrated,
+            plain_lidar.T_base_lidar_calibrated,
+            rtol=1e-9,
+            atol=1e-12,
+        )
+    assert result.metric_error_final == pytest.approx(plain.metric_error_final, rel=1e-9)
