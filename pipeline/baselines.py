@@ -65,7 +65,7 @@ def entire_cloud(
             )
             for stop in range(len(row))
         ]
-        for lidar, row in enumerate(prepared.clouds)
+        for lidar, row in enumerate(prepared.clouds_in_lidar)
     ]
     optimisation = config.optimisation.model_copy(
         update={"floor_terms": False, "max_points_per_cloud": max_points_per_cloud}

@@ -172,8 +172,9 @@ def without_bleeding(problem: CalibrationProblem, truth: Truth) -> CalibrationPr
 
 def run_trial(case: str, seed: int, rate: float, methods: Sequence[str]) -> dict[str, Trial]:
     from pipeline.baselines import entire_cloud, without_rough_refinement
-    from pipeline.calibrate import calibrate, order_lidars
+    from pipeline.calibrate import calibrate
     from pipeline.config import config_from_mapping, resolved
+    from pipeline.stages.setup import order_lidars
     from pipeline.synth import simulate_problem
     from pipeline.transforms import invert
 

@@ -37,7 +37,6 @@ from functools import partial  # noqa: E402
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
-from pipeline.calibrate import denoise_above_floor  # noqa: E402
 from pipeline.config import PipelineConfig  # noqa: E402
 from pipeline.denoise import (  # noqa: E402
     DenoiseConfig,
@@ -48,6 +47,7 @@ from pipeline.denoise import (  # noqa: E402
     observation_centre,
 )
 from pipeline.segmentation import fit_floor  # noqa: E402
+from pipeline.stages.denoise_stage import denoise_above_floor  # noqa: E402
 from tests.pipeline.denoise.clouds import LabelledCloud, synth_stop_clouds  # noqa: E402
 
 DEFAULT_SCENES = ("set1-box", "set1-cylinder", "set1-capsule")

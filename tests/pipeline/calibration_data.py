@@ -11,10 +11,12 @@ from functools import cache
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.calibrate import CalibrationResult, Prepared, calibrate, prepare, segment_all
+from pipeline.calibrate import CalibrationResult, calibrate, prepare
 from pipeline.config import PipelineConfig
 from pipeline.problem import CalibrationProblem
 from pipeline.segmentation import Segmentation
+from pipeline.stages.segment import segment_all
+from pipeline.stages.state import CalibrationState
 from pipeline.synth import Truth, simulate_problem
 from pipeline.transforms import invert
 
@@ -32,7 +34,7 @@ def floor_only_problem() -> tuple[CalibrationProblem, Truth]:
 
 
 @cache
-def box_prepared() -> tuple[Prepared, tuple[tuple[Segmentation, ...], ...]]:
+def box_prepared() -> tuple[CalibrationState, tuple[tuple[Segmentation, ...], ...]]:
     problem, _ = box_problem()
     config = PipelineConfig()
     prepared = prepare(problem, config)

@@ -1,0 +1,137 @@
+"""Stage 1, the noise filter, with the floor fit it stands on.
+
+Stage 1 judges only the points standing above the floor (the object candidates, a tenth of a
+full-rate cloud): bleeding points elsewhere never reach the later stages, and judging all would
+cost ten times as much. Their neighbours are searched among every point. So each cloud's floor is
+fitted first, here; its time is segmentation's (the floor is stage 2's). Clouds stay at full
+rate: segmentation voxelises only what stands above the floor. Only non-repetitive LiDARs' clouds
+are filtered (see `stage_1_filters`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from pipeline.config import PipelineConfig
+from pipeline.denoise import DenoiseConfig, DenoiseResult, KeepMask, denoise
+from pipeline.problem import LidarInfo, ScanPattern
+from pipeline.segmentation import FloorFit, Plane, above_floor, fit_floor
+from pipeline.stages.runner import Listeners, StageOutcome
+from pipeline.stages.state import CalibrationState, Detail, PerCloud
+from pipeline.transforms import Points
+
+
+def stage_1_filters(lidar: LidarInfo, config: DenoiseConfig) -> bool:
+    """Whether stage 1 filters this LiDAR's clouds: when enabled, for non-repetitive scans only.
+
+    The filter takes a point that is sparse for its place in the scan, on a sheet along its beam,
+    for a mixed return (METHOD.md: a filter for non-repetitive scans). A spinning LiDAR re-fires
+    the same directions every scan, so over a stop its points pile up along each beam, on scan
+    lines degrees apart: its surfaces look like that too. Filtered, the spinning scenario's clouds
+    lost 5,600 clean points above the floor for 3,600 mixed returns (seed 10) and calibrated
+    6.0 mm off against 2.0 mm unfiltered (10 seeds); even removing exactly the labelled mixed
+    returns gave 2.5 mm (bench_calibration's `labelled_stage1`), stage 2 already dropping the
+    points whose surface the beam meets edge-on. A LiDAR whose pattern is UNKNOWN is not
+    filtered either: filtering a spinning LiDAR cost 4 mm (above), leaving a Mid-70 unfiltered
+    0.09 mm on average (the benchmark quoted at `PipelineConfig.denoise`).
+    `config.scan_patterns` overrides the recording's pattern."""
+    pattern = config.scan_patterns.get(lidar.frame, lidar.scan_pattern)
+    return config.enabled and pattern is ScanPattern.NON_REPETITIVE
+
+
+def denoise_above_floor(
+    cloud: Points, floor: Plane, config: PipelineConfig, frame: str | None = None
+) -> DenoiseResult:
+    """Stage 1 as the pipeline runs it on one stop cloud (N, 3) in the LiDAR frame `frame`: only
+    the points standing above `floor` (object candidates) are judged, against all their
+    neighbours. The frame picks its optical axis (`denoise.optical_axes`)."""
+    judge = above_floor(cloud, floor, config.segmentation)
+    plane = np.array([*floor.normal, floor.offset], dtype=np.float64)  # a x + b y + c z + d = 0
+    axis = config.denoise.optical_axes.get(frame or "", config.denoise.optical_axis)
+    return denoise(cloud, config.denoise, axis, floor_plane=plane, judge=judge)
+
+
+def fit_floors(state: CalibrationState, config: PipelineConfig) -> PerCloud[FloorFit | None]:
+    """Each cloud's floor (RANSAC in the LiDAR frame around its expected up), None where none."""
+    return tuple(
+        tuple(fit_floor(cloud, up, config.segmentation) for cloud in clouds)
+        for clouds, up in zip(state.clouds_in_lidar, state.up_in_lidar, strict=True)
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Filtered:
+    kept: PerCloud[KeepMask | None]
+    judged_points: int
+    removed_points: int
+
+
+def _filter(
+    state: CalibrationState,
+    floors: PerCloud[FloorFit | None],
+    frames: tuple[str, ...],
+    config: PipelineConfig,
+) -> _Filtered:
+    """Stage 1 on the clouds of the LiDARs `frames` that have a floor; the rest all kept."""
+    kept: list[tuple[KeepMask | None, ...]] = []
+    judged = removed = 0
+    for lidar, clouds, row_floors in zip(state.lidars, state.clouds_in_lidar, floors, strict=True):
+        row: list[KeepMask | None] = []
+        for cloud, floor in zip(clouds, row_floors, strict=True):
+            if lidar.frame not in frames or floor is None:
+                row.append(None)
+                continue
+            result = denoise_above_floor(cloud, floor[0], config, lidar.frame)
+            judged += result.judged_points
+            removed += result.removed_points
+            row.append(result.keep if result.removed_points else None)
+        kept.append(tuple(row))
+    return _Filtered(tuple(kept), judged, removed)
+
+
+def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
+    """Fit the floors, then filter the clouds of the LiDARs stage 1 is for."""
+    started = time.perf_counter()
+    floors = fit_floors(state, config)
+    floor_seconds = time.perf_counter() - started
+    frames = tuple(lidar.frame for lidar in state.lidars if stage_1_filters(lidar, config.denoise))
+    filtered = _filter(state, floors, frames, config)
+    new_state = dataclasses.replace(
+        state,
+        floors_in_lidar=floors,
+        kept=filtered.kept,
+        filtered_frames=frames,
+        floor_seconds=floor_seconds,
+    )
+    details: dict[str, Detail] = {
+        "input_points": sum(len(cloud) for row in state.clouds_in_lidar for cloud in row),
+        "judged_points": filtered.judged_points,
+        "removed_points": filtered.removed_points,
+        "enabled": config.denoise.enabled,
+        "filtered_frames": ",".join(frames),
+        "method": str(config.denoise.method),
+    }
+    message = _message(new_state, filtered, config.denoise)
+    return StageOutcome(new_state, details, message, credited_seconds=-floor_seconds)
+
+
+def _message(state: CalibrationState, filtered: _Filtered, config: DenoiseConfig) -> str:
+    if not config.enabled:
+        return "disabled"
+    unfiltered = [f for f in state.lidars if f.frame not in state.filtered_frames]
+    reasons = {ScanPattern.UNKNOWN: "scan pattern unknown"}
+    by_reason: dict[str, list[str]] = {}
+    for lidar in unfiltered:
+        pattern = config.scan_patterns.get(lidar.frame, lidar.scan_pattern)
+        by_reason.setdefault(reasons.get(pattern, "repetitive scans"), []).append(lidar.frame)
+    left_alone = "; ".join(
+        f"{', '.join(frames)} not filtered ({reason})" for reason, frames in by_reason.items()
+    )
+    if not state.filtered_frames:
+        return left_alone
+    message = (
+        f"removed {filtered.removed_points} of the {filtered.judged_points} points above the floor"
+    )
+    return f"{message}; {left_alone}" if unfiltered else message
