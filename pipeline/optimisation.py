@@ -27,10 +27,9 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 from pykdtree.kdtree import KDTree
 
-from pipeline.rough_refinement import adjoint, plane_in_parent, tangent_basis
-from pipeline.segmentation import Plane
+from pipeline.geometry import Plane, adjoint, exp_se3, hat, plane_in_parent, tangent_basis
 from pipeline.surfaces import local_planes, orient_towards_origin
-from pipeline.transforms import Matrix4, Points, exp_se3
+from pipeline.transforms import Matrix4, Points
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
 
@@ -212,14 +211,6 @@ def _cross(a: Points, b: Points) -> Points:
     out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
-
-
-def _hat_batch(v: Points) -> NDArray[np.float64]:
-    out = np.zeros((len(v), 3, 3))
-    out[:, 0, 1], out[:, 0, 2] = -v[:, 2], v[:, 1]
-    out[:, 1, 0], out[:, 1, 2] = v[:, 2], -v[:, 0]
-    out[:, 2, 0], out[:, 2, 1] = -v[:, 1], v[:, 0]
     return out
 
 
@@ -463,7 +454,7 @@ class _Problem:
                 continue
             at = normal_G if ideal else normal
             d_twist = np.zeros((3, 6))
-            d_twist[:2, 3:] = -tangent.T @ _hat_batch(at[None])[0]
+            d_twist[:2, 3:] = -tangent.T @ hat(at)
             d_twist[2, :3] = -at
             if (col := self.layout.stop(stop)) >= 0:
                 jac[row, :, col : col + 6] = d_twist
@@ -476,7 +467,7 @@ class _Problem:
             # frame (the robot stands on the floor at every stop).
             R_stop, t_stop = T_G_ref[stop][:3, :3], T_G_ref[stop][:3, 3]
             floor_ref = T_G_ref[0][:3, :3].T @ normal_G
-            jac[row, :2, col + 3 : col + 6] = -(tangent.T @ R_stop) @ _hat_batch(floor_ref[None])[0]
+            jac[row, :2, col + 3 : col + 6] = -(tangent.T @ R_stop) @ hat(floor_ref)
             jac[row, 2, col : col + 3] = -floor_ref
             jac[row, 2, col + 3 : col + 6] = -_cross(floor_ref, R_stop.T @ t_stop)
         return residual / self.floor_sigma, jac / self.floor_sigma[None, :, None]
@@ -538,13 +529,13 @@ class _Problem:
         else:
             eye = np.broadcast_to(np.eye(3), (n, 3, 3))
             jac[:, :, 0:3] = eye
-            jac[:, :, 3:6] = -_hat_batch(g)
+            jac[:, :, 3:6] = -hat(g)
             jac[:, :, 6:9] = R_stop
-            jac[:, :, 9:12] = -R_stop @ _hat_batch(q)
+            jac[:, :, 9:12] = -R_stop @ hat(q)
             jac[:, :, 12:15] = -eye
-            jac[:, :, 15:18] = _hat_batch(m)
+            jac[:, :, 15:18] = hat(m)
             jac[:, :, 18:21] = -R_target
-            jac[:, :, 21:24] = R_target @ _hat_batch(q_target)
+            jac[:, :, 21:24] = R_target @ hat(q_target)
         starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if n else np.zeros(0, np.int64)
         ends = np.r_[starts[1:], n] if n else starts
         for a, b_end in zip(starts, ends, strict=True):

@@ -18,8 +18,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from pipeline.errors import BadInputError
-from pipeline.segmentation import Plane
-from pipeline.transforms import Matrix4, exp_se3
+from pipeline.geometry import Plane, adjoint, exp_se3, hat, plane_in_parent, tangent_basis
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
 
@@ -64,20 +63,6 @@ class RoughRefinementResult:
     seconds: float
 
 
-def plane_in_parent(plane: Plane, T_parent_child: Matrix4) -> tuple[NDArray[np.float64], float]:
-    """A plane of the child frame expressed in the parent frame: (normal (3,), offset)."""
-    normal = T_parent_child[:3, :3] @ plane.normal
-    return normal, float(plane.offset - normal @ T_parent_child[:3, 3])
-
-
-def tangent_basis(normal: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(3, 2): two unit vectors orthogonal to `normal` and to each other."""
-    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-    first = np.cross(normal, helper)
-    first /= np.linalg.norm(first)
-    return np.stack([first, np.cross(normal, first)], axis=1)
-
-
 def floor_dof_basis(
     normal: NDArray[np.float64], origin: NDArray[np.float64]
 ) -> NDArray[np.float64]:
@@ -90,21 +75,6 @@ def floor_dof_basis(
     basis[:3, :2] = np.cross(origin, tangent.T).T
     basis[:3, 2] = normal
     return basis
-
-
-def adjoint(T: Matrix4) -> NDArray[np.float64]:
-    """(6, 6) adjoint of T for twists `[rho; phi]`: `exp(Ad(T) xi) = T exp(xi) T^-1`."""
-    R, t = T[:3, :3], T[:3, 3]
-    hat_t = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
-    ad = np.zeros((6, 6))
-    ad[:3, :3] = R
-    ad[:3, 3:] = hat_t @ R
-    ad[3:, 3:] = R
-    return ad
-
-
-def _hat(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def _residuals(
@@ -180,7 +150,7 @@ def refine_with_floor(
         for row, (lidar, stop, _) in enumerate(observations):
             # d(residual)/d(left twist in G) of the pose mapping this plane into G.
             d_twist = np.zeros((3, 6))
-            d_twist[:2, 3:] = -tangent.T @ _hat(normals[row])
+            d_twist[:2, 3:] = -tangent.T @ hat(normals[row])
             d_twist[2, :3] = -normals[row]
             if stop > 0:
                 basis = floor_dof_basis(normal_G, T_G_ref[stop][:3, 3])
