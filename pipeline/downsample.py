@@ -8,29 +8,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.errors import BadInputError
+from pipeline.geometry import voxel_keys
 from pipeline.transforms import Points
-
-_HALF_RANGE = 1 << 20
 
 
 def voxel_downsample(points: Points, voxel_size: float) -> Points:
     """(N, 3) -> (M, 3): the centroid of the points in each occupied cubic voxel of `voxel_size`.
 
-    The output order follows the voxels' keys (deterministic for a given input).
+    The output order follows the voxels' keys (deterministic for a given input). Points beyond
+    the grid (`pipeline.geometry.voxel_keys`) raise `BadInputError`.
     """
     points = np.asarray(points, dtype=np.float64)
     if voxel_size <= 0 or len(points) == 0:
         return points
-    if np.abs(points).max() / voxel_size >= _HALF_RANGE:
-        raise BadInputError(
-            f"points up to {np.abs(points).max():.0f} m from the sensor do not fit the voxel grid "
-            f"of {voxel_size} m; use a larger voxel_size_m or crop the clouds"
-        )
-    # 21 bits per axis around the origin (+-20 km at 2 cm) pack a voxel into one int64 key
-    # without the min/max passes a dense index would need.
-    cells = np.floor(points * (1.0 / voxel_size)).astype(np.int64) + _HALF_RANGE
-    keys = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]
+    keys = voxel_keys(points, voxel_size, "voxel_size_m")
     # An unstable sort is ten times faster and the grouping does not care about ties.
     order = np.argsort(keys)
     sorted_keys = keys[order]

@@ -16,8 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
+from pipeline.geometry import adjoint, hat
 from pipeline.optimisation import OptimisationResult
-from pipeline.rough_refinement import adjoint
 from pipeline.transforms import Matrix4, make_transform
 
 DOF_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
@@ -66,7 +66,7 @@ def level_rotation(up_base: NDArray[np.float64]) -> NDArray[np.float64]:
     if sin < 1e-12:
         return np.eye(3) if cos > 0 else np.diag([1.0, -1.0, -1.0])
     k = axis / sin
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    K = hat(k)
     result: NDArray[np.float64] = np.eye(3) + sin * K + (1 - cos) * (K @ K)
     return result
 
@@ -149,9 +149,7 @@ def pose_uncertainties(
         t = (T_level_ref @ result.T_ref_lidar[lidar])[:3, 3]
         # A twist about the level frame's origin moves the LiDAR's origin by rho + phi x t.
         about_origin = np.eye(6)
-        about_origin[:3, 3:] = -np.array(
-            [[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]]
-        )
+        about_origin[:3, 3:] = -hat(t)
         A = about_origin @ adjoint(T_level_ref)
 
         stddev = _stddev(formal, col, A)

@@ -12,14 +12,15 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from pipeline.errors import BadInputError
-from pipeline.segmentation import Plane
-from pipeline.transforms import Matrix4, exp_se3
+from pipeline.geometry import Plane, adjoint, exp_se3, hat, plane_in_parent, tangent_basis
+from pipeline.transforms import Points
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
 
@@ -64,20 +65,6 @@ class RoughRefinementResult:
     seconds: float
 
 
-def plane_in_parent(plane: Plane, T_parent_child: Matrix4) -> tuple[NDArray[np.float64], float]:
-    """A plane of the child frame expressed in the parent frame: (normal (3,), offset)."""
-    normal = T_parent_child[:3, :3] @ plane.normal
-    return normal, float(plane.offset - normal @ T_parent_child[:3, 3])
-
-
-def tangent_basis(normal: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(3, 2): two unit vectors orthogonal to `normal` and to each other."""
-    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-    first = np.cross(normal, helper)
-    first /= np.linalg.norm(first)
-    return np.stack([first, np.cross(normal, first)], axis=1)
-
-
 def floor_dof_basis(
     normal: NDArray[np.float64], origin: NDArray[np.float64]
 ) -> NDArray[np.float64]:
@@ -92,23 +79,26 @@ def floor_dof_basis(
     return basis
 
 
-def adjoint(T: Matrix4) -> NDArray[np.float64]:
-    """(6, 6) adjoint of T for twists `[rho; phi]`: `exp(Ad(T) xi) = T exp(xi) T^-1`."""
-    R, t = T[:3, :3], T[:3, 3]
-    hat_t = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
-    ad = np.zeros((6, 6))
-    ad[:3, :3] = R
-    ad[:3, 3:] = hat_t @ R
-    ad[3:, 3:] = R
-    return ad
+class PlaneObservation(NamedTuple):
+    """A floor plane one LiDAR saw at one stop, in that LiDAR's frame."""
+
+    lidar: int
+    stop: int
+    plane: Plane
 
 
-def _hat(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+def plane_observations(planes: Sequence[Sequence[Plane | None]]) -> list[PlaneObservation]:
+    """Every plane of `planes[lidar][stop]` that is not None, LiDAR by LiDAR, stop by stop."""
+    return [
+        PlaneObservation(lidar, stop, plane)
+        for lidar, row in enumerate(planes)
+        for stop, plane in enumerate(row)
+        if plane is not None
+    ]
 
 
 def _residuals(
-    observations: Sequence[tuple[int, int, Plane]],
+    observations: Sequence[PlaneObservation],
     T_G_ref: NDArray[np.float64],
     T_ref_lidar: NDArray[np.float64],
     normal_G: NDArray[np.float64],
@@ -121,6 +111,113 @@ def _residuals(
     for row, (lidar, stop, plane) in enumerate(observations):
         normals[row], offsets[row] = plane_in_parent(plane, T_G_ref[stop] @ T_ref_lidar[lidar])
     return (normals - normal_G) @ tangent, offsets - offset_G, normals
+
+
+def _summary(tilt: NDArray[np.float64], offset: NDArray[np.float64]) -> PlaneResiduals:
+    return PlaneResiduals(
+        tilt_deg=float(np.degrees(np.sqrt(np.mean(np.sum(tilt**2, axis=1))))),
+        offset_m=float(np.sqrt(np.mean(offset**2))),
+    )
+
+
+# Parameters: the floor's tilt (2) and offset (1), then 3 per stop and 3 per LiDAR past the first.
+
+
+def _stop_column(stop: int) -> int:
+    return 3 + 3 * (stop - 1)
+
+
+def _lidar_column(lidar: int, n_stops: int) -> int:
+    return 3 + 3 * (n_stops - 1) + 3 * (lidar - 1)
+
+
+def _parameter_count(n_stops: int, n_lidars: int) -> int:
+    return 3 + 3 * (n_stops - 1) + 3 * (n_lidars - 1)
+
+
+def _floor_in_reference(T_G_ref: NDArray[np.float64], normal_G: NDArray[np.float64]) -> Points:
+    """The floor's normal in the reference frame: the same at every stop, the robot stays on it."""
+    normal_ref: Points = T_G_ref[0][:3, :3].T @ normal_G
+    return normal_ref
+
+
+def _jacobian(
+    observations: Sequence[PlaneObservation],
+    normals: NDArray[np.float64],
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    normal_G: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """(K, 3, P) derivatives of the tilt (2) and offset (1) residuals of every observation, whose
+    planes mapped into G have the `normals` (K, 3)."""
+    n_stops, n_lidars = len(T_G_ref), len(T_ref_lidar)
+    tangent = tangent_basis(normal_G)
+    normal_ref = _floor_in_reference(T_G_ref, normal_G)
+    jac = np.zeros((len(observations), 3, _parameter_count(n_stops, n_lidars)))
+    jac[:, 0, 0] = jac[:, 1, 1] = -1.0
+    jac[:, 2, 2] = -1.0
+    for row, (lidar, stop, _) in enumerate(observations):
+        # d(residual)/d(left twist in G) of the pose mapping this plane into G.
+        d_twist = np.zeros((3, 6))
+        d_twist[:2, 3:] = -tangent.T @ hat(normals[row])
+        d_twist[2, :3] = -normals[row]
+        if stop > 0:
+            basis = floor_dof_basis(normal_G, T_G_ref[stop][:3, 3])
+            col = _stop_column(stop)
+            jac[row, :, col : col + 3] = d_twist @ basis
+        if lidar > 0:
+            basis = floor_dof_basis(normal_ref, T_ref_lidar[lidar][:3, 3])
+            col = _lidar_column(lidar, n_stops)
+            jac[row, :, col : col + 3] = d_twist @ adjoint(T_G_ref[stop]) @ basis
+    return jac
+
+
+def _gauss_newton_step(
+    observations: Sequence[PlaneObservation],
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    floor_G: tuple[NDArray[np.float64], float],
+    config: RoughRefinementConfig,
+) -> NDArray[np.float64]:
+    """The step (P,) of one reweighted Gauss-Newton iteration from these poses and floor."""
+    sigma = np.array([np.radians(config.normal_sigma_deg)] * 2 + [config.offset_sigma_m])
+    tilt, offset, normals = _residuals(observations, T_G_ref, T_ref_lidar, *floor_G)
+    residual = np.column_stack([tilt, offset]) / sigma
+    weight = 1.0 / (1.0 + np.sum(residual**2, axis=1) / config.cauchy_scale**2)
+    jac = _jacobian(observations, normals, T_G_ref, T_ref_lidar, floor_G[0])
+    jac /= sigma[None, :, None]
+    weighted = jac * weight[:, None, None]
+    hessian = np.einsum("kri,krj->ij", weighted, jac)
+    gradient = np.einsum("kri,kr->i", weighted, residual)
+    # Tiny damping: a stop or LiDAR without any plane keeps its pose (no singular solve).
+    hessian[np.diag_indices(len(hessian))] += 1e-9 * max(float(hessian.diagonal().max()), 1.0)
+    step: NDArray[np.float64] = -np.linalg.solve(hessian, gradient)
+    return step
+
+
+def _move(
+    step: NDArray[np.float64],
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    floor_G: tuple[NDArray[np.float64], float],
+) -> tuple[NDArray[np.float64], float]:
+    """Apply `step` to the poses (in place) and return the moved floor (normal, offset) in G.
+
+    Poses move along the bases the Jacobian was built with (the floor before this step).
+    """
+    normal_G, offset_G = floor_G
+    normal_ref = _floor_in_reference(T_G_ref, normal_G)
+    for stop in range(1, len(T_G_ref)):
+        col = _stop_column(stop)
+        basis = floor_dof_basis(normal_G, T_G_ref[stop][:3, 3])
+        T_G_ref[stop] = exp_se3(basis @ step[col : col + 3]) @ T_G_ref[stop]
+    for lidar in range(1, len(T_ref_lidar)):
+        col = _lidar_column(lidar, len(T_G_ref))
+        basis = floor_dof_basis(normal_ref, T_ref_lidar[lidar][:3, 3])
+        T_ref_lidar[lidar] = exp_se3(basis @ step[col : col + 3]) @ T_ref_lidar[lidar]
+    normal_G = normal_G + tangent_basis(normal_G) @ step[:2]
+    normal_G /= np.linalg.norm(normal_G)
+    return normal_G, offset_G + float(step[2])
 
 
 def refine_with_floor(
@@ -139,88 +236,33 @@ def refine_with_floor(
     started = time.perf_counter()
     T_G_ref = np.array(T_G_ref, dtype=np.float64)
     T_ref_lidar = np.array(T_ref_lidar, dtype=np.float64)
-    n_lidars, n_stops = len(T_ref_lidar), len(T_G_ref)
-    observations = [
-        (lidar, stop, plane)
-        for lidar in range(n_lidars)
-        for stop in range(n_stops)
-        if (plane := planes[lidar][stop]) is not None
-    ]
+    observations = plane_observations(planes)
     if not observations:
         raise BadInputError(
             "no LiDAR saw a floor plane at any stop; the method needs the floor "
             "(check the recording, or the segmentation's floor_distance_m and max_floor_tilt_deg)"
         )
     # Seed the floor with the reference's own view when it has one (G is tied to it).
-    first = next((o for o in observations if o[0] == 0), observations[0])
-    normal_G, offset_G = plane_in_parent(first[2], T_G_ref[first[1]] @ T_ref_lidar[first[0]])
-
-    sigma = np.array([np.radians(config.normal_sigma_deg)] * 2 + [config.offset_sigma_m])
-    n_params = 3 + 3 * (n_stops - 1) + 3 * (n_lidars - 1)
-
-    def summary(tilt: NDArray[np.float64], offset: NDArray[np.float64]) -> PlaneResiduals:
-        return PlaneResiduals(
-            tilt_deg=float(np.degrees(np.sqrt(np.mean(np.sum(tilt**2, axis=1))))),
-            offset_m=float(np.sqrt(np.mean(offset**2))),
-        )
-
-    tilt, offset, _ = _residuals(observations, T_G_ref, T_ref_lidar, normal_G, offset_G)
-    initial = summary(tilt, offset)
+    first = next((o for o in observations if o.lidar == 0), observations[0])
+    floor_G = plane_in_parent(first.plane, T_G_ref[first.stop] @ T_ref_lidar[first.lidar])
+    tilt, offset, _ = _residuals(observations, T_G_ref, T_ref_lidar, *floor_G)
+    initial = _summary(tilt, offset)
     converged, iterations = False, 0
     for iterations in range(1, config.max_iterations + 1):  # noqa: B007 (reported below)
-        tilt, offset, normals = _residuals(observations, T_G_ref, T_ref_lidar, normal_G, offset_G)
-        residual = np.column_stack([tilt, offset]) / sigma
-        weight = 1.0 / (1.0 + np.sum(residual**2, axis=1) / config.cauchy_scale**2)
-        tangent = tangent_basis(normal_G)
-        # The floor's normal in the reference frame: the same at every stop, the robot stays on it.
-        normal_ref = T_G_ref[0][:3, :3].T @ normal_G
-        jac = np.zeros((len(observations), 3, n_params))
-        jac[:, 0, 0] = jac[:, 1, 1] = -1.0
-        jac[:, 2, 2] = -1.0
-        for row, (lidar, stop, _) in enumerate(observations):
-            # d(residual)/d(left twist in G) of the pose mapping this plane into G.
-            d_twist = np.zeros((3, 6))
-            d_twist[:2, 3:] = -tangent.T @ _hat(normals[row])
-            d_twist[2, :3] = -normals[row]
-            if stop > 0:
-                basis = floor_dof_basis(normal_G, T_G_ref[stop][:3, 3])
-                col = 3 + 3 * (stop - 1)
-                jac[row, :, col : col + 3] = d_twist @ basis
-            if lidar > 0:
-                basis = floor_dof_basis(normal_ref, T_ref_lidar[lidar][:3, 3])
-                col = 3 + 3 * (n_stops - 1) + 3 * (lidar - 1)
-                jac[row, :, col : col + 3] = d_twist @ adjoint(T_G_ref[stop]) @ basis
-        jac /= sigma[None, :, None]
-        weighted = jac * weight[:, None, None]
-        hessian = np.einsum("kri,krj->ij", weighted, jac)
-        gradient = np.einsum("kri,kr->i", weighted, residual)
-        # Tiny damping: a stop or LiDAR without any plane keeps its pose (no singular solve).
-        hessian[np.diag_indices(n_params)] += 1e-9 * max(float(hessian.diagonal().max()), 1.0)
-        step = -np.linalg.solve(hessian, gradient)
-        # Poses move along the bases the Jacobian was built with (the floor before this step).
-        for stop in range(1, n_stops):
-            col = 3 + 3 * (stop - 1)
-            basis = floor_dof_basis(normal_G, T_G_ref[stop][:3, 3])
-            T_G_ref[stop] = exp_se3(basis @ step[col : col + 3]) @ T_G_ref[stop]
-        for lidar in range(1, n_lidars):
-            col = 3 + 3 * (n_stops - 1) + 3 * (lidar - 1)
-            basis = floor_dof_basis(normal_ref, T_ref_lidar[lidar][:3, 3])
-            T_ref_lidar[lidar] = exp_se3(basis @ step[col : col + 3]) @ T_ref_lidar[lidar]
-        normal_G = normal_G + tangent @ step[:2]
-        normal_G /= np.linalg.norm(normal_G)
-        offset_G += float(step[2])
+        step = _gauss_newton_step(observations, T_G_ref, T_ref_lidar, floor_G, config)
+        floor_G = _move(step, T_G_ref, T_ref_lidar, floor_G)
         if float(np.linalg.norm(step)) < config.step_tolerance:
             converged = True
             break
-    tilt, offset, _ = _residuals(observations, T_G_ref, T_ref_lidar, normal_G, offset_G)
+    tilt, offset, _ = _residuals(observations, T_G_ref, T_ref_lidar, *floor_G)
     return RoughRefinementResult(
         T_G_ref=T_G_ref,
         T_ref_lidar=T_ref_lidar,
-        floor_G=Plane(normal=normal_G, offset=offset_G),
+        floor_G=Plane(normal=floor_G[0], offset=floor_G[1]),
         converged=converged,
         iterations=iterations,
         residual_initial=initial,
-        residual_final=summary(tilt, offset),
+        residual_final=_summary(tilt, offset),
         observations=len(observations),
         seconds=time.perf_counter() - started,
     )

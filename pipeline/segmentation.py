@@ -19,6 +19,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.downsample import voxel_downsample
+from pipeline.geometry import Plane, pack_cells, voxel_keys
 from pipeline.surfaces import local_planes
 from pipeline.transforms import Points
 
@@ -98,15 +99,6 @@ class SegmentationConfig(BaseModel):
         "6 mm on full-rate cylinders); a quadric follows them",
     )
     seed: int = 0
-
-
-@dataclass(frozen=True)
-class Plane:
-    """`normal . p + offset = 0` for points `p` on the plane; `normal` (3,) is unit and points up,
-    so `offset` > 0 is the height of the frame's origin above the plane."""
-
-    normal: NDArray[np.float64]
-    offset: float
 
 
 @dataclass(frozen=True)
@@ -193,7 +185,6 @@ def find_floor(
     return Plane(normal=normal, offset=offset), inliers, rms
 
 
-_HALF_RANGE = 1 << 20
 # The 13 neighbour offsets of a cell in one half of its 26-neighbourhood (the other half are the
 # same edges seen from the other end).
 _HALF_NEIGHBOURHOOD = np.array(
@@ -206,23 +197,21 @@ _HALF_NEIGHBOURHOOD = np.array(
     ],
     dtype=np.int64,
 )
+_NEIGHBOUR_KEY_OFFSETS = pack_cells(_HALF_NEIGHBOURHOOD)
 
 
 def euclidean_clusters(points: Points, radius: float) -> NDArray[np.int64]:
     """Label (N,) of each point's cluster, on a grid of cubic cells of edge `radius`: points in
     touching cells (26-neighbourhood) share a cluster. So two points closer than `radius` always
     share one, and points up to 2 * sqrt(3) * radius apart may; a grid is ten times faster than
-    the radius graph of the points themselves."""
+    the radius graph of the points themselves. Points beyond the grid raise `BadInputError`."""
     if len(points) == 0:
         return np.zeros(0, dtype=np.int64)
-    cells = np.floor(points * (1.0 / radius)).astype(np.int64) + _HALF_RANGE
-    keys = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]
-    occupied, cell_of = np.unique(keys, return_inverse=True)
-    # Packed keys add like vectors as long as no field over- or underflows, which the offset of
-    # half the range guarantees for +-1 steps.
-    offsets = (_HALF_NEIGHBOURHOOD[:, 0] << 42) + (_HALF_NEIGHBOURHOOD[:, 1] << 21)
-    offsets += _HALF_NEIGHBOURHOOD[:, 2]
-    neighbours = occupied[:, None] + offsets[None, :]
+    occupied, cell_of = np.unique(
+        voxel_keys(points, radius, "cluster_radius_m"), return_inverse=True
+    )
+    # A neighbour cell's key is the cell's key plus the packed offset (the grid keeps a margin).
+    neighbours = occupied[:, None] + _NEIGHBOUR_KEY_OFFSETS[None, :]
     position = np.searchsorted(occupied, neighbours)
     found = position < len(occupied)
     found[found] = occupied[position[found]] == neighbours[found]

@@ -2,6 +2,7 @@
 
 Convention (DESIGN.md): `T_parent_child` maps points from `child` into `parent`,
 `p_parent = R @ p_child + t`, the same as a tf edge parent -> child. Quaternions are `[x, y, z, w]`.
+Twists, the exp and log maps and planes are in `pipeline.geometry`.
 """
 
 from __future__ import annotations
@@ -63,36 +64,6 @@ def apply(T: Matrix4, points: Points) -> Points:
     return np.asarray(points, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
 
 
-def exp_se3(xi: ArrayLike) -> Matrix4:
-    """`T` from a twist `xi = [rho (3), phi (3)]` (rotation vector `phi`), SE(3)'s exp map."""
-    xi = np.asarray(xi, dtype=np.float64)
-    rho, phi = xi[:3], xi[3:]
-    theta = float(np.linalg.norm(phi))
-    K = _hat(phi)
-    if theta < 1e-9:
-        V = np.eye(3) + 0.5 * K
-    else:
-        V = (
-            np.eye(3)
-            + (1 - np.cos(theta)) / theta**2 * K
-            + (theta - np.sin(theta)) / theta**3 * (K @ K)
-        )
-    return make_transform(Rotation.from_rotvec(phi).as_matrix(), V @ rho)
-
-
-def log_se3(T: Matrix4) -> NDArray[np.float64]:
-    """Inverse of `exp_se3`: the twist `[rho, phi]` of `T`."""
-    phi = Rotation.from_matrix(T[:3, :3]).as_rotvec()
-    theta = float(np.linalg.norm(phi))
-    K = _hat(phi)
-    if theta < 1e-9:
-        V_inv = np.eye(3) - 0.5 * K
-    else:
-        half = theta / 2
-        V_inv = np.eye(3) - 0.5 * K + (1 - half / np.tan(half)) / theta**2 * (K @ K)
-    return np.concatenate([V_inv @ T[:3, 3], phi])
-
-
 def rotation_angle_deg(R: NDArray[np.float64]) -> float:
     """The angle in degrees of the rotation `R` (3, 3)."""
     cos = (np.trace(R) - 1.0) / 2.0
@@ -103,7 +74,3 @@ def pose_difference(T_a: Matrix4, T_b: Matrix4) -> tuple[float, float]:
     """Translation distance (m) and rotation angle (deg) between two poses of the same frames."""
     delta = invert(T_a) @ T_b
     return float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3])), rotation_angle_deg(delta[:3, :3])
-
-
-def _hat(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

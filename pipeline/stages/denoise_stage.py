@@ -16,8 +16,9 @@ import numpy as np
 
 from pipeline.config import PipelineConfig
 from pipeline.denoise import DenoiseConfig, DenoiseResult, KeepMask, denoise
+from pipeline.geometry import Plane
 from pipeline.problem import LidarInfo, ScanPattern
-from pipeline.segmentation import FloorFit, Plane, above_floor, fit_floor
+from pipeline.segmentation import FloorFit, above_floor, fit_floor
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail, PerCloud
 from pipeline.transforms import Points

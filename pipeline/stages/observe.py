@@ -8,9 +8,9 @@ import dataclasses
 from collections.abc import Sequence
 
 from pipeline.config import PipelineConfig
+from pipeline.geometry import Plane
 from pipeline.observability import PoseUncertainty, level_rotation, pose_uncertainties
 from pipeline.problem import LidarInfo
-from pipeline.segmentation import Plane
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, required
 from pipeline.transforms import Matrix4, make_transform

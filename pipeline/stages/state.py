@@ -15,12 +15,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.denoise import KeepMask
+from pipeline.geometry import Plane
 from pipeline.metric import MetricError
 from pipeline.observability import PoseUncertainty
 from pipeline.optimisation import OptimisationResult
 from pipeline.problem import LidarInfo
 from pipeline.rough_refinement import RoughRefinementResult
-from pipeline.segmentation import FloorFit, Plane, Segmentation
+from pipeline.segmentation import FloorFit, Segmentation
 from pipeline.transforms import Matrix4, Points, pose_difference
 from pipeline.verdict import Verdict
 

@@ -5,8 +5,8 @@ import numpy as np
 from pipeline.calibrate import prepare
 from pipeline.config import PipelineConfig
 from pipeline.denoise import DenoiseConfig
+from pipeline.geometry import Plane
 from pipeline.problem import CalibrationProblem, ScanPattern
-from pipeline.segmentation import Plane
 from pipeline.stages import denoise_stage
 from pipeline.stages.denoise_stage import denoise_above_floor
 from pipeline.stages.runner import Listeners, StageOutcome

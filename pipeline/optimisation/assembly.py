@@ -1,0 +1,145 @@
+"""Assembly: the normal equations `H = J^T W J`, `b = J^T W r` of the joint optimisation, from
+the point pairs' 24-column Jacobians and the floor terms, in the state vector's layout."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.optimisation.association import Pairs
+from pipeline.optimisation.objective import JointObjective
+from pipeline.optimisation.residuals import (
+    floor_terms,
+    point_jacobians,
+    point_residuals,
+    robust_weight_and_cost,
+)
+
+NormalEquations = tuple[NDArray[np.float64], NDArray[np.float64], float, int]
+"""`(H (P, P), b (P,), weighted squared residual sum, number of residual rows)`."""
+
+
+def normal_equations(
+    objective: JointObjective,
+    pairs: Pairs,
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    scale: float,
+    *,
+    ideal_floor: bool = False,
+    floor_stop: int | None = None,
+) -> NormalEquations:
+    """H = J^T W J, b = J^T W r (weights in 1/sigma^2), the weighted squared residual sum
+    and the number of residual rows. `ideal_floor`: see `residuals.floor_terms`; `floor_stop`:
+    only that stop's floor terms (None: every stop's)."""
+    layout = objective.layout
+    H = np.zeros((layout.size, layout.size))
+    b = np.zeros(layout.size)
+    placed = objective.place(T_G_ref, T_ref_lidar)
+    sorted_pairs, key = _grouped(objective, pairs)
+    residual = point_residuals(objective.config.residual, sorted_pairs, placed)
+    weight, _ = robust_weight_and_cost(
+        np.linalg.norm(residual, axis=1), scale, objective.config.robust_loss
+    )
+    weight = weight / objective.config.point_sigma_m**2
+    jac = point_jacobians(objective, sorted_pairs, placed, T_G_ref)
+    _add_point_groups(H, b, objective, key, jac, weight, residual)
+    chi2 = float(np.sum(weight[:, None] * residual**2))
+    count = residual.size
+    if objective.floor:
+        floor_residual, floor_jac = floor_terms(
+            objective, T_G_ref, T_ref_lidar, jacobians=True, ideal=ideal_floor
+        )
+        if floor_stop is not None:
+            rows = np.array([stop == floor_stop for _, stop, _ in objective.floor])
+            floor_residual, floor_jac = floor_residual[rows], floor_jac[rows]
+        H += np.einsum("kri,krj->ij", floor_jac, floor_jac)
+        b += np.einsum("kri,kr->i", floor_jac, floor_residual)
+        chi2 += float(np.sum(floor_residual**2))
+        count += floor_residual.size
+    return H, b, chi2, count
+
+
+def _grouped(objective: JointObjective, pairs: Pairs) -> tuple[Pairs, NDArray[np.int64]]:
+    """The pairs sorted by group (source cloud, target stop, target LiDAR), and each one's key:
+    within a group the four poses involved are the same, so one small GEMM gives the group's
+    contribution."""
+    layout = objective.layout
+    slice_of = np.searchsorted(objective.source_starts, pairs.source, side="right") - 1
+    target_stop = objective.reference.stop[pairs.target]
+    target_lidar = objective.reference.lidar[pairs.target]
+    key = (slice_of * layout.n_stops + target_stop) * layout.n_lidars + target_lidar
+    order = np.argsort(key, kind="stable")
+    return Pairs(pairs.source[order], pairs.target[order], pairs.cross_error), key[order]
+
+
+def _add_point_groups(
+    H: NDArray[np.float64],
+    b: NDArray[np.float64],
+    objective: JointObjective,
+    key: NDArray[np.int64],
+    jac: NDArray[np.float64],
+    weight: NDArray[np.float64],
+    residual: NDArray[np.float64],
+) -> None:
+    """Add to `H` and `b` (in place) every group's rows of the pairs sorted by `key`."""
+    layout = objective.layout
+    n = len(key)
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if n else np.zeros(0, np.int64)
+    ends = np.r_[starts[1:], n] if n else starts
+    for a, b_end in zip(starts, ends, strict=True):
+        group = int(key[a])
+        t = group % layout.n_lidars
+        k = (group // layout.n_lidars) % layout.n_stops
+        lidar, j, *_ = objective.sources.slices[group // layout.n_lidars // layout.n_stops]
+        # Slots (S_j, C_i, S_k, C_t); a pose in two slots (the same stop, or a LiDAR's own
+        # map) gets the sum of their blocks, a fixed pose none.
+        slots: dict[int, list[int]] = {}
+        for slot, column in enumerate(
+            (layout.stop(j), layout.lidar(lidar), layout.stop(k), layout.lidar(t))
+        ):
+            if column >= 0:
+                slots.setdefault(column, []).append(slot)
+        if not slots:
+            continue
+        block = np.concatenate(
+            [
+                sum(jac[a:b_end, :, 6 * x : 6 * x + 6] for x in group_slots)
+                for group_slots in slots.values()
+            ],
+            axis=2,
+        )
+        wblock = block * weight[a:b_end, None, None]
+        cols = np.concatenate([np.arange(c, c + 6) for c in slots])
+        flat = block.reshape(-1, block.shape[2])
+        wflat = wblock.reshape(-1, block.shape[2])
+        H[np.ix_(cols, cols)] += wflat.T @ flat
+        b[cols] += wflat.T @ residual[a:b_end].reshape(-1)
+
+
+def stop_contributions(
+    objective: JointObjective,
+    pairs: Pairs,
+    stops: NDArray[np.float64],
+    lidars: NDArray[np.float64],
+    scale: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per stop, the information (J, P, P) and gradient (J, P) of the residuals that touch it.
+
+    A pair touches stop j when its source or its target point was seen there; a pair between two
+    stops counts for both, as leaving either out removes it.
+    """
+    layout = objective.layout
+    H = np.zeros((layout.n_stops, layout.size, layout.size))
+    b = np.zeros((layout.n_stops, layout.size))
+    source_stop = objective.sources.stop[pairs.source]
+    target_stop = objective.reference.stop[pairs.target]
+    for j in range(layout.n_stops):
+        touching = (source_stop == j) | (target_stop == j)
+        if not touching.any() and not any(stop == j for _, stop, _ in objective.floor):
+            continue
+        subset = Pairs(pairs.source[touching], pairs.target[touching], pairs.cross_error)
+        H[j], b[j], _, _ = normal_equations(
+            objective, subset, stops, lidars, scale, ideal_floor=True, floor_stop=j
+        )
+    return H, b

@@ -1,0 +1,228 @@
+"""The solver: phases of Levenberg-Marquardt steps with the associations redone after each step,
+then the information at the solution."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.geometry import Plane, exp_se3
+from pipeline.optimisation.assembly import normal_equations, stop_contributions
+from pipeline.optimisation.association import Pairs, associate
+from pipeline.optimisation.config import OptimisationConfig
+from pipeline.optimisation.layout import ParameterLayout
+from pipeline.optimisation.objective import JointObjective
+from pipeline.optimisation.residuals import cost, point_residuals
+from pipeline.optimisation.result import OptimisationResult
+from pipeline.transforms import Points
+
+
+def optimise(
+    objects: Sequence[Sequence[Points]],
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    config: OptimisationConfig,
+    *,
+    planes: Sequence[Sequence[Plane | None]] | None = None,
+    floor_G: Plane | None = None,
+    normals: Sequence[Sequence[Points]] | None = None,
+    on_iteration: Callable[[int], None] | None = None,
+) -> OptimisationResult:
+    """Refine the poses so every LiDAR's object map agrees with the reference LiDAR's.
+
+    `objects[lidar][stop]`: (N, 3) object points in that LiDAR's frame; LiDAR 0 is the reference.
+    `T_G_ref` (J, 4, 4): the reference's pose per stop (stop 0 fixed). `T_ref_lidar` (L, 4, 4):
+    extrinsics relative to the reference (index 0 is the identity, fixed). `planes[lidar][stop]`
+    and `floor_G` (stage 3) add the floor terms; without them only the objects count.
+    `normals[lidar][stop]` (N, 3): the points' surface normals when the caller has them
+    (segmentation does); without them they are fitted here, and the clouds smoothed if
+    `smooth_clouds`. `on_iteration(k)` is called after iteration k (progress for a caller).
+    """
+    started = time.perf_counter()
+    phases = _phases(objects, planes, floor_G, len(T_G_ref), config, normals)
+    lidars = np.array(T_ref_lidar, dtype=np.float64)
+    run = _Run(
+        stops=np.array(T_G_ref, dtype=np.float64),
+        lidars=lidars,
+        history=[lidars.copy()],
+        damping=config.initial_damping,
+        scale=config.kernel_scale_min_m,
+    )
+    for phase, objective in enumerate(phases):
+        _iterate(run, objective, config, last=phase == len(phases) - 1, on_iteration=on_iteration)
+    return _result(phases[-1], run, started)
+
+
+def _phases(
+    objects: Sequence[Sequence[Points]],
+    planes: Sequence[Sequence[Plane | None]] | None,
+    floor_G: Plane | None,
+    n_stops: int,
+    config: OptimisationConfig,
+    normals: Sequence[Sequence[Points]] | None,
+) -> list[JointObjective]:
+    """The objective of each phase: a coarse one on `coarse_points_per_cloud` points when that is
+    fewer than the final phase's, then the final one (normal gate `fine_max_normal_angle_deg`)."""
+    fine_config = config.model_copy(
+        update={"max_normal_angle_deg": config.fine_max_normal_angle_deg}
+    )
+    phases = [JointObjective.build(objects, planes, floor_G, n_stops, fine_config, normals)]
+    coarse_cap = config.coarse_points_per_cloud
+    if coarse_cap is not None and (
+        config.max_points_per_cloud is None or coarse_cap < config.max_points_per_cloud
+    ):
+        coarse_config = config.model_copy(update={"max_points_per_cloud": coarse_cap})
+        phases.insert(
+            0, JointObjective.build(objects, planes, floor_G, n_stops, coarse_config, normals)
+        )
+    return phases
+
+
+@dataclass
+class _Run:
+    """The poses and the record of one optimisation, carried across its phases."""
+
+    stops: NDArray[np.float64]
+    lidars: NDArray[np.float64]
+    history: list[NDArray[np.float64]]  # T_ref_lidar before each step and at the end
+    damping: float  # Levenberg-Marquardt lambda
+    scale: float  # the robust kernel's scale at the last step
+    errors: list[float] = field(default_factory=list)
+    converged: bool = False
+    iteration: int = 0
+
+
+def _iterate(
+    run: _Run,
+    objective: JointObjective,
+    config: OptimisationConfig,
+    *,
+    last: bool,
+    on_iteration: Callable[[int], None] | None,
+) -> None:
+    """One phase's steps, each with fresh associations, until the poses stop moving or the
+    iterations run out; `run` is updated in place."""
+    # The coarse phase only has to get close: it stops at ten times the tolerance.
+    tolerance = 1.0 if last else 10.0
+    run.converged = False
+    pairs = associate(objective, objective.place(run.stops, run.lidars))
+    while run.iteration < config.max_iterations:
+        run.iteration += 1
+        run.errors.append(pairs.cross_error)
+        # Graduated robustness: wide at first, while everything is far off, then tight so
+        # that parts one LiDAR saw and the reference did not stop pulling.
+        run.scale = max(
+            config.kernel_scale_min_m,
+            config.kernel_scale_initial_m * config.kernel_scale_decay ** (run.iteration - 1),
+        )
+        run.stops, run.lidars, moved, run.damping = lm_step(
+            objective, pairs, run.stops, run.lidars, run.scale, run.damping
+        )
+        run.history.append(run.lidars.copy())
+        pairs = associate(objective, objective.place(run.stops, run.lidars))
+        if on_iteration is not None:
+            on_iteration(run.iteration)
+        if moved is None or (
+            moved[0] < tolerance * config.translation_tolerance_m
+            and moved[1] < tolerance * config.rotation_tolerance_deg
+            and (not last or run.scale <= config.kernel_scale_min_m)
+        ):
+            run.converged = True
+            break
+
+
+def _result(objective: JointObjective, run: _Run, started: float) -> OptimisationResult:
+    """The result at the final poses, with the final phase's associations there: the
+    information matrix, the per-stop parts of it and the variance factor."""
+    layout, stops, lidars = objective.layout, run.stops, run.lidars
+    pairs = associate(objective, objective.place(stops, lidars))
+    run.errors.append(pairs.cross_error)
+    H = np.zeros((layout.size, layout.size))
+    gradient = np.zeros(layout.size)
+    chi2, count = 0.0, 0
+    if len(pairs.source) or objective.floor:
+        H, gradient, chi2, count = normal_equations(
+            objective, pairs, stops, lidars, run.scale, ideal_floor=True
+        )
+    stop_H, stop_b = stop_contributions(objective, pairs, stops, lidars, run.scale)
+    redundancy = max(count - layout.size, 1)
+    residual_rms = float("nan")
+    if len(pairs.source):
+        residual = point_residuals(objective.config.residual, pairs, objective.place(stops, lidars))
+        residual_rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
+    per_lidar = np.bincount(objective.sources.lidar[pairs.source], minlength=layout.n_lidars)
+    return OptimisationResult(
+        T_G_ref=stops,
+        T_ref_lidar=lidars,
+        converged=run.converged,
+        iterations=run.iteration,
+        error_per_iteration=tuple(run.errors),
+        T_ref_lidar_per_iteration=np.stack(run.history),
+        information=H,
+        gradient=gradient,
+        stop_information=stop_H,
+        stop_gradient=stop_b,
+        variance_factor=chi2 / redundancy,
+        layout=layout,
+        correspondences=tuple(int(c) for c in per_lidar),
+        residual_rms_m=residual_rms,
+        seconds=time.perf_counter() - started,
+    )
+
+
+def apply_step(
+    step: NDArray[np.float64],
+    layout: ParameterLayout,
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The poses moved by the state-vector `step` (P,): each pose's twist on its left."""
+    new_stops, new_lidars = T_G_ref.copy(), T_ref_lidar.copy()
+    for j in range(1, layout.n_stops):
+        c = layout.stop(j)
+        new_stops[j] = exp_se3(step[c : c + 6]) @ T_G_ref[j]
+    for i in range(1, layout.n_lidars):
+        c = layout.lidar(i)
+        new_lidars[i] = exp_se3(step[c : c + 6]) @ T_ref_lidar[i]
+    return new_stops, new_lidars
+
+
+def _largest_motion(before: NDArray[np.float64], after: NDArray[np.float64]) -> tuple[float, float]:
+    """Largest translation (m) and rotation (deg) between matching poses of two (N, 4, 4) stacks."""
+    delta = np.linalg.inv(before) @ after
+    translation = float(np.max(np.linalg.norm(after[:, :3, 3] - before[:, :3, 3], axis=1)))
+    cos = np.clip((np.trace(delta[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1, 1)
+    return translation, float(np.degrees(np.max(np.arccos(cos))))
+
+
+def lm_step(
+    objective: JointObjective,
+    pairs: Pairs,
+    stops: NDArray[np.float64],
+    lidars: NDArray[np.float64],
+    scale: float,
+    damping: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[float, float] | None, float]:
+    """One Levenberg-Marquardt step with fixed associations: the new poses, the largest motion
+    (m, deg) of any pose (None when no step lowered the cost) and the new damping."""
+    layout = objective.layout
+    H, b, _, _ = normal_equations(objective, pairs, stops, lidars, scale)
+    before = cost(objective, pairs, stops, lidars, scale)
+    # A pose nothing constrains (no objects, no floor) keeps its value instead of a singular
+    # solve; the observability stage reports it.
+    floor = 1e-12 * max(float(np.trace(H)) / max(layout.size, 1), 1.0)
+    for _ in range(10):
+        A = H + damping * np.diag(np.diag(H)) + floor * np.eye(layout.size)
+        step = np.asarray(-np.linalg.solve(A, b), dtype=np.float64)
+        trial_stops, trial_lidars = apply_step(step, layout, stops, lidars)
+        if cost(objective, pairs, trial_stops, trial_lidars, scale) <= before:
+            stop_motion = _largest_motion(stops, trial_stops)
+            lidar_motion = _largest_motion(lidars, trial_lidars)
+            moved = (max(stop_motion[0], lidar_motion[0]), max(stop_motion[1], lidar_motion[1]))
+            return trial_stops, trial_lidars, moved, max(damping / 3.0, 1e-9)
+        damping = max(damping * 4.0, 1e-6)
+    return stops, lidars, None, damping

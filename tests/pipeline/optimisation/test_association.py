@@ -1,0 +1,61 @@
+"""Association on a wall at x = 1 m in G, seen by two LiDARs at two stops (all stops at G)."""
+
+import numpy as np
+import pytest
+
+from pipeline.optimisation import OptimisationConfig
+from pipeline.optimisation.association import associate
+from pipeline.optimisation.objective import JointObjective
+from pipeline.transforms import make_transform
+
+GRID = np.array([(0.0, y, z) for y in np.arange(-0.5, 0.51, 0.1) for z in np.arange(0, 1, 0.1)])
+WALL_NORMAL = np.array([1.0, 0.0, 0.0])
+
+
+def wall_seen_from(x_lidar: float, rng: np.random.Generator) -> np.ndarray:
+    """The wall's points in the frame of a LiDAR at (x_lidar, 0, 0), jittered along the wall."""
+    jitter = rng.uniform(-0.02, 0.02, size=GRID.shape) * [0.0, 1.0, 1.0]
+    return GRID + jitter + [1.0 - x_lidar, 0.0, 0.0]
+
+
+def objective(x_lidar_1: float, **update: object) -> tuple[JointObjective, np.ndarray]:
+    rng = np.random.default_rng(0)
+    objects = [
+        [wall_seen_from(0.0, rng), wall_seen_from(0.0, rng)],
+        [wall_seen_from(x_lidar_1, rng), np.zeros((0, 3))],
+    ]
+    normals = [[np.tile(WALL_NORMAL, (len(c), 1)) for c in row] for row in objects]
+    config = OptimisationConfig(max_points_per_cloud=None, **update)  # type: ignore[arg-type]
+    built = JointObjective.build(objects, None, None, 2, config, normals)
+    lidars = np.stack([np.eye(4), make_transform(np.eye(3), [x_lidar_1, 0.0, 0.0])])
+    return built, lidars
+
+
+def test_a_reference_point_is_paired_with_the_map_of_another_stop() -> None:
+    built, lidars = objective(0.0)
+    pairs = associate(built, built.place(np.stack([np.eye(4)] * 2), lidars))
+    reference_sources = built.sources.lidar[pairs.source] == 0
+    assert reference_sources.sum() == 2 * len(GRID)
+    source_stop = built.sources.stop[pairs.source]
+    target_stop = built.reference.stop[pairs.target]
+    assert np.all(source_stop[reference_sources] != target_stop[reference_sources])
+    # The other LiDAR's points go to the reference map, at any stop.
+    assert np.all(built.reference.lidar[pairs.target] == 0)
+    assert (~reference_sources).sum() == len(GRID)
+    assert pairs.cross_error < 0.03
+
+
+def test_pairs_beyond_the_gate_are_dropped_but_still_measured() -> None:
+    built, lidars = objective(0.0, max_correspondence_m=0.05)
+    lidars[1] = make_transform(np.eye(3), [0.3, 0.0, 0.0])  # LiDAR 1's wall lands 30 cm behind
+    pairs = associate(built, built.place(np.stack([np.eye(4)] * 2), lidars))
+    assert not np.any(built.sources.lidar[pairs.source] == 1)
+    assert pairs.cross_error == pytest.approx(0.3, abs=0.01)
+
+
+@pytest.mark.parametrize(("gate_deg", "paired"), [(45.0, False), (None, True)])
+def test_the_back_of_a_wall_is_not_its_front(gate_deg: float | None, paired: bool) -> None:
+    # LiDAR 1 stands behind the wall: its normals face it, against the reference's.
+    built, lidars = objective(2.0, max_normal_angle_deg=gate_deg)
+    pairs = associate(built, built.place(np.stack([np.eye(4)] * 2), lidars))
+    assert np.any(built.sources.lidar[pairs.source] == 1) == paired
