@@ -29,6 +29,7 @@ from service.routes import (
     exports,
     fleet,
     health,
+    keys,
     overrides,
     reports,
     robots,
@@ -89,6 +90,7 @@ def create_app(settings: Settings) -> FastAPI:
         exports,
         csv_exports,
         webhooks,
+        keys,
     ):
         app.include_router(module.router)
     app.include_router(dashboard_router)

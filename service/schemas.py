@@ -20,7 +20,7 @@ from pydantic import (
 )
 
 from pipeline.transforms import from_translation_xyzw
-from service.models import DeliveryStatus, EventType, OverrideAction, RunKind, RunStatus
+from service.models import DeliveryStatus, EventType, OverrideAction, RunKind, RunStatus, Scope
 from service.parameters import PlainText
 from service.problems import Problem
 
@@ -351,6 +351,18 @@ class ToleranceProfilePublic(_ToleranceProfileFields):
 
 class ToleranceProfilePage(BaseModel):
     items: list[ToleranceProfilePublic]
+
+
+# -- keys ---------------------------------------------------------------------------------------
+
+
+class KeyPublic(BaseModel):
+    """An API key as its holder may see it: never the secret."""
+
+    id: str = Field(description="The key's public id (its first part).")
+    name: str | None
+    scopes: list[Scope] = Field(description="`admin` implies every other scope.")
+    robot_id: str | None = Field(description="The only robot an upload key bound to one serves.")
 
 
 # -- health -------------------------------------------------------------------------------------

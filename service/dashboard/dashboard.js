@@ -1,88 +1,23 @@
 // fleetcal dashboard: a small client of the /v1 API, no build step and no dependencies.
-// Pages (hash routes): #/ fleet overview, #/robots/<id> one robot's history, #/runs/<id> one run.
+// Pages (hash routes): #/ fleet overview, #/robots/<id> one robot's history, #/runs/<id> one run;
+// compare.js draws #/robots/<id>/compare and webhooks.js #/webhooks (admin keys).
 "use strict";
 
 (() => {
-  const KEY_STORAGE = "fleetcal.apiKey";
   // The report images' colours (pipeline.report.LIDAR_COLOURS): LiDAR i, the reference first.
   const COLOURS = ["#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442"];
   const AXIS_COLOURS = ["#D55E00", "#009E73", "#0072B2"]; // x, y, z
   const POLL_MS = 1000;
   const app = document.getElementById("app");
-  const crumbs = document.getElementById("crumbs");
   const forgetButton = document.getElementById("forget-key");
+  const navWebhooks = document.getElementById("nav-webhooks");
+  const keyName = document.getElementById("key-name");
   let generation = 0; // bumped on every navigation: stale loads and polls stop drawing
   let blobUrls = [];
 
-  // -- DOM helpers ------------------------------------------------------------------------------
-
-  function h(tag, attrs, ...children) {
-    const node = document.createElement(tag);
-    setAttributes(node, attrs);
-    node.append(...children.flat().filter((c) => c !== null && c !== undefined && c !== false).map(asNode));
-    return node;
-  }
-
-  const SVG_NS = "http://www.w3.org/2000/svg";
-  function s(tag, attrs, ...children) {
-    const node = document.createElementNS(SVG_NS, tag);
-    setAttributes(node, attrs);
-    node.append(...children.flat().filter((c) => c !== null && c !== undefined && c !== false).map(asNode));
-    return node;
-  }
-
-  function setAttributes(node, attrs) {
-    for (const [name, value] of Object.entries(attrs || {})) {
-      if (value === null || value === undefined || value === false) continue;
-      if (name.startsWith("on")) node.addEventListener(name.slice(2), value);
-      else if (name === "dataset") Object.assign(node.dataset, value);
-      else node.setAttribute(name, value === true ? "" : String(value));
-    }
-  }
-
-  function asNode(child) {
-    return child instanceof Node ? child : document.createTextNode(String(child));
-  }
-
-  function show(...nodes) {
-    app.replaceChildren(...nodes);
-  }
-
-  function setCrumbs(...items) {
-    const parts = [h("a", { href: "#/" }, "Fleet")];
-    for (const [label, href] of items) parts.push(" / ", href ? h("a", { href }, label) : h("span", {}, label));
-    crumbs.replaceChildren(...parts);
-  }
-
-  // -- API --------------------------------------------------------------------------------------
-
-  class ApiError extends Error {
-    constructor(status, problem) {
-      super(problem.detail || problem.title || `HTTP ${status}`);
-      this.status = status;
-      this.problem = problem;
-    }
-  }
-
-  async function request(path) {
-    const key = sessionStorage.getItem(KEY_STORAGE);
-    const response = await fetch(path, { headers: { "X-API-Key": key || "" } });
-    if (!response.ok) {
-      let problem;
-      try {
-        problem = await response.json();
-      } catch {
-        problem = { title: response.statusText, detail: "" };
-      }
-      if (response.status === 401) sessionStorage.removeItem(KEY_STORAGE);
-      throw new ApiError(response.status, problem);
-    }
-    return response;
-  }
-
-  async function api(path) {
-    return (await request(path)).json();
-  }
+  // api.js and ui.js (loaded first) call the API and build elements; this file draws pages.
+  const { KEY_STORAGE, ApiError, request, api, saveBlob, qs, access } = fleetcal.api;
+  const { h, s, show, setCrumbs, fact, ago, when, shortId, statusBadge, verdictBadge, acceptedBadge, swatch, downloadButton } = fleetcal.ui;
 
   async function blobUrl(path) {
     const url = URL.createObjectURL(await (await request(path)).blob());
@@ -90,66 +25,11 @@
     return url;
   }
 
-  async function download(path, fallbackName) {
-    const response = await request(path);
-    const disposition = response.headers.get("Content-Disposition") || "";
-    const match = disposition.match(/filename="?([^";]+)"?/);
-    const url = URL.createObjectURL(await response.blob());
-    const link = h("a", { href: url, download: match ? match[1] : fallbackName, hidden: true });
-    document.body.append(link);
-    link.click();
-    link.remove();
-    setTimeout(() => URL.revokeObjectURL(url), 60_000);
-  }
-
-  function qs(params) {
-    const query = new URLSearchParams();
-    for (const [k, v] of Object.entries(params)) if (v !== null && v !== undefined) query.set(k, v);
-    const text = query.toString();
-    return text ? `?${text}` : "";
-  }
-
   // -- formatting -------------------------------------------------------------------------------
 
   // format.js, ticks.js and drift.js (loaded first) hold the pure logic; this file draws pages.
   const { mm, deg, checkCells, stddevSummary } = fleetcal.format;
   const { ofAccepted, rotationChangeDeg } = fleetcal.drift;
-
-  function ago(iso) {
-    if (!iso) return "–";
-    const seconds = (Date.now() - new Date(iso).getTime()) / 1000;
-    const steps = [
-      [60, "s", 1],
-      [3600, "min", 60],
-      [86400, "h", 3600],
-      [86400 * 60, "d", 86400],
-    ];
-    for (const [limit, unit, size] of steps) if (seconds < limit) return `${Math.max(0, Math.floor(seconds / size))} ${unit} ago`;
-    return new Date(iso).toLocaleDateString();
-  }
-
-  function when(iso) {
-    return iso ? h("time", { datetime: iso, title: new Date(iso).toLocaleString() }, ago(iso)) : "–";
-  }
-
-  function shortId(id) {
-    return id.slice(0, 8);
-  }
-
-  function statusBadge(status) {
-    return h("span", { class: `badge status-${status}`, dataset: { status } }, status);
-  }
-
-  function verdictBadge(passed) {
-    if (passed === null || passed === undefined) return h("span", { class: "badge verdict-none" }, "no verdict");
-    return h("span", { class: `badge ${passed ? "pass" : "fail"}`, dataset: { verdict: passed ? "passed" : "failed" } }, passed ? "PASSED" : "FAILED");
-  }
-
-  function swatch(colour) {
-    const node = h("span", { class: "swatch" });
-    node.style.background = colour;
-    return node;
-  }
 
   // -- geometry (quaternions [x, y, z, w]) ---------------------------------------------------------
 
@@ -273,6 +153,7 @@
         { class: "card narrow" },
         h("h1", {}, "fleetcal dashboard"),
         h("p", {}, "Enter an API key with the read scope (", h("code", {}, "fleetcal keys create --scope read --data-dir DIR"), " with the DIR the service runs on, or the admin key ", h("code", {}, "fleetcal serve"), " printed on its first start). It is kept in this browser tab's session only."),
+        h("p", { class: "muted small" }, "A key that also has the override scope (", h("code", {}, "--scope read --scope override"), ") may accept a failed calibration or reject a passed one; an admin key also sees the webhooks and their deliveries."),
         form,
         error,
       ),
@@ -323,9 +204,15 @@
     show(
       h("h1", {}, "Fleet"),
       tiles,
-      h("section", { class: "card" }, h("h2", {}, "Robots"), table, fleet.items.length ? [shown, more] : null),
+      h("section", { class: "card" }, h("h2", {}, "Robots"), table, fleet.items.length ? [shown, more] : null, fleetDownload()),
       h("section", { class: "card" }, h("h2", {}, "Recent runs"), runTable(recent.items, true)),
     );
+  }
+
+  function fleetDownload() {
+    const message = h("p", { class: "error", id: "fleet-download-error" });
+    const button = downloadButton({ label: "Calibrations in use (CSV)", path: () => "/v1/fleet/calibrations.csv", fallback: "fleet-calibrations.csv", message, attrs: { id: "fleet-csv" } });
+    return h("div", { class: "buttons fleet-download" }, button, h("span", { class: "muted small" }, "every robot's calibration in use, one row per LiDAR"), message);
   }
 
   function fleetRow(robot) {
@@ -336,7 +223,7 @@
       h("td", {}, h("a", { href: `#/robots/${encodeURIComponent(robot.id)}`, class: "robot-link" }, robot.id)),
       h("td", {}, robot.model || h("span", { class: "muted" }, "–")),
       h("td", {}, run ? [h("a", { href: `#/runs/${run.id}` }, `${run.kind.replaceAll("_", " ")} ${shortId(run.id)}`), " ", statusBadge(run.status)] : h("span", { class: "muted" }, "no run yet")),
-      h("td", {}, run ? verdictBadge(run.passed) : "–"),
+      h("td", {}, run ? [verdictBadge(run.passed), " ", acceptedBadge(run.passed, run.accepted, false)] : "–"),
       h("td", { class: "num" }, run ? mm(run.metric_error_final) : "–"),
       h("td", {}, run ? when(run.created_at) : "–"),
       h("td", {}, robot.latest_calibration ? [h("a", { href: `#/runs/${robot.latest_calibration.run_id}` }, "accepted"), " ", when(robot.latest_calibration.measured_at)] : h("span", { class: "muted" }, "none yet")),
@@ -365,7 +252,7 @@
             withRobot ? h("td", {}, h("a", { href: `#/robots/${encodeURIComponent(run.robot_id)}` }, run.robot_id)) : null,
             h("td", {}, run.kind.replaceAll("_", " ")),
             h("td", {}, statusBadge(run.status)),
-            h("td", {}, verdictBadge(run.passed)),
+            h("td", {}, verdictBadge(run.passed), " ", acceptedBadge(run.passed, run.accepted, false)),
             h("td", { class: "num" }, mm(run.metric_error_final)),
             h("td", {}, when(run.created_at)),
             h("td", { class: "num" }, run.started_at && run.finished_at ? `${((new Date(run.finished_at) - new Date(run.started_at)) / 1000).toFixed(1)} s` : "–"),
@@ -424,16 +311,27 @@
         fact("Model", robot.model || "–"),
         fact("Tolerance profile", robot.tolerance_profile || "none"),
         fact("Latest run", robot.latest_run ? [h("a", { href: `#/runs/${robot.latest_run.id}` }, shortId(robot.latest_run.id)), " ", statusBadge(robot.latest_run.status), " ", verdictBadge(robot.latest_run.passed)] : "none"),
-        fact("Calibration in use", accepted ? [h("a", { href: `#/runs/${accepted.run_id}` }, shortId(accepted.run_id)), " ", when(accepted.measured_at)] : "none accepted yet"),
+        fact("Calibration in use", h("span", { id: "calibration-in-use", dataset: { runId: accepted ? accepted.run_id : "" } }, accepted ? [h("a", { href: `#/runs/${accepted.run_id}` }, shortId(accepted.run_id)), " ", when(accepted.measured_at)] : "none accepted yet")),
         fact("Registered", when(robot.created_at)),
       ),
       h("section", { class: "card", id: "extrinsics" }, h("h2", {}, "Extrinsics over time"), frames.length ? frames.map((frame, i) => lidarHistory(frame, i, history.filter((p) => p.frame === frame), limits)) : h("p", { class: "muted" }, "No calibrated runs yet.")),
-      h("section", { class: "card" }, h("h2", {}, "Runs"), runsBody, more),
+      h("section", { class: "card" }, h("h2", {}, "Runs"), h("p", {}, h("a", { href: fleetcal.compare.href(robot.id), id: "compare-link" }, "Compare two runs")), runsBody, more),
+      robotDownloads(robot.id),
     );
   }
 
-  function fact(label, value) {
-    return h("div", {}, h("dt", {}, label), h("dd", {}, value));
+  function robotDownloads(robotId) {
+    const message = h("p", { class: "error", id: "robot-download-error" });
+    const path = `/v1/robots/${encodeURIComponent(robotId)}/history.csv`;
+    const csv = (label, id, query) => downloadButton({ label, path: () => `${path}${qs(query)}`, fallback: `${robotId}-history.csv`, message, attrs: { id } });
+    return h(
+      "section",
+      { class: "card", id: "robot-downloads" },
+      h("h2", {}, "Downloads"),
+      h("div", { class: "buttons" }, csv("History (CSV)", "history-csv", {}), csv("Accepted calibrations only (CSV)", "accepted-csv", { accepted: "true" })),
+      h("p", { class: "muted small" }, "One row per LiDAR and run, oldest first: T_base_lidar as translation (m) and quaternion, with the verdict and whether it is accepted."),
+      message,
+    );
   }
 
   function lidarHistory(frame, index, points, limits) {
@@ -504,16 +402,17 @@
     );
   }
 
-  async function runPage(runId, my) {
+  // `answered`: the run as an accept or reject just returned it (drawn without asking again).
+  async function runPage(runId, my, answered) {
     // Before the request: an error page (unknown run, no access) names what was asked for.
     setCrumbs([`run ${shortId(runId)}`, null]);
-    const run = await api(`/v1/runs/${runId}`);
+    const [run, me] = await Promise.all([answered || api(`/v1/runs/${runId}`), access()]);
     if (my !== generation) return;
     setCrumbs([run.robot_id, `#/robots/${encodeURIComponent(run.robot_id)}`], [`run ${shortId(run.id)}`, null]);
     const active = run.status === "queued" || run.status === "running";
     const doc = run.result;
     const sections = [
-      h("h1", {}, `Run ${shortId(run.id)} `, statusBadge(run.status), " ", h("span", { id: "verdict" }, verdictBadge(doc ? doc.verdict.passed : null))),
+      h("h1", {}, `Run ${shortId(run.id)} `, statusBadge(run.status), " ", h("span", { id: "verdict" }, verdictBadge(doc ? doc.verdict.passed : null)), " ", h("span", { id: "accepted" }, doc ? acceptedBadge(doc.verdict.passed, run.accepted, true) : null)),
       h(
         "dl",
         { class: "facts" },
@@ -537,6 +436,7 @@
           h("p", { class: "muted small" }, "Mean distance of the other LiDARs' object points to the reference LiDAR's map."),
         ),
         checksCard(doc.verdict),
+        fleetcal.overrides.card(run, me, (decided) => runPage(decided.id, my, decided)),
         imagesCard(run),
         lidarsCard(doc),
         doc.drift ? driftCard(doc.drift) : null,
@@ -702,41 +602,20 @@
     const message = h("p", { class: "error", id: "download-error" });
     const allow = h("input", { type: "checkbox", id: "allow-failed" });
     const button = (label, format, fallback) =>
-      h(
-        "button",
-        {
-          type: "button",
-          class: "download",
-          dataset: { format },
-          onclick: async (event) => {
-            const target = event.currentTarget;
-            message.textContent = "";
-            target.disabled = true;
-            try {
-              await download(`/v1/runs/${run.id}/exports/${format}${qs({ allow_failed: allow.checked ? "true" : null })}`, fallback);
-            } catch (err) {
-              message.textContent = `${label}: ${err.message}`;
-            } finally {
-              target.disabled = false;
-            }
-          },
-        },
+      downloadButton({
         label,
-      );
+        path: () => `/v1/runs/${run.id}/exports/${format}${qs({ allow_failed: allow.checked ? "true" : null })}`,
+        fallback,
+        message,
+        attrs: { class: "download", dataset: { format } },
+      });
     const resultJson = h(
       "button",
       {
         type: "button",
         class: "download",
         dataset: { format: "result" },
-        onclick: () => {
-          const url = URL.createObjectURL(new Blob([JSON.stringify(doc, null, 2)], { type: "application/json" }));
-          const link = h("a", { href: url, download: `${run.robot_id}-${shortId(run.id)}-result.json`, hidden: true });
-          document.body.append(link);
-          link.click();
-          link.remove();
-          setTimeout(() => URL.revokeObjectURL(url), 60_000);
-        },
+        onclick: () => saveBlob(new Blob([JSON.stringify(doc, null, 2)], { type: "application/json" }), `${run.robot_id}-${shortId(run.id)}-result.json`),
       },
       "result.json",
     );
@@ -751,6 +630,7 @@
         button("tf_static launch (ROS 2)", "tf-static", "tf_static.launch.yaml"),
         button("URDF snippet", "urdf", "lidars.urdf"),
         button("extrinsics.yaml", "extrinsics", "extrinsics.yaml"),
+        button("Autoware sensor_kit_calibration.yaml", "autoware", "sensor_kit_calibration.yaml"),
         button("Calibrated recording", "recording", "calibrated.mcap"),
       ),
       doc.verdict.passed ? null : h("p", {}, h("label", {}, allow, " Export anyway: this calibration failed its verdict.")),
@@ -776,22 +656,49 @@
       return;
     }
     forgetButton.hidden = false;
+    const header = access()
+      .then((me) => {
+        navWebhooks.hidden = !me.may("admin");
+        keyName.textContent = me.name ? `key: ${me.name}` : "";
+      })
+      .catch(() => (navWebhooks.hidden = true)); // the page itself says why the key is refused
     const path = location.hash.replace(/^#/, "") || "/";
     // For tests and scripts: which page is shown, and whether it has finished drawing.
     app.dataset.route = path;
     app.dataset.ready = "false";
+    const [page, query] = path.split("?");
+    const params = new URLSearchParams(query || "");
+    // Pages of the other scripts return their content; it is shown if still wanted.
+    const draw = async (nodes) => {
+      const content = await nodes;
+      if (my === generation) show(...content);
+    };
     let match;
     try {
       if ((match = path.match(/^\/robots\/([^/]+)$/))) await robotPage(decodeURIComponent(match[1]), my);
-      else if ((match = path.match(/^\/runs\/([0-9a-f-]{36})$/))) await runPage(match[1], my);
-      else if (path === "/") await overviewPage(my);
+      else if ((match = page.match(/^\/robots\/([^/]+)\/compare$/))) {
+        const robotId = decodeURIComponent(match[1]);
+        setCrumbs([robotId, `#/robots/${encodeURIComponent(robotId)}`], ["compare", null]);
+        await draw(fleetcal.compare.page(robotId, params));
+      } else if ((match = path.match(/^\/runs\/([0-9a-f-]{36})$/))) await runPage(match[1], my);
+      else if (path === "/webhooks") {
+        setCrumbs(["webhooks", null]);
+        await draw(fleetcal.webhooks.listPage());
+      } else if ((match = page.match(/^\/webhooks\/([0-9a-f-]{36})$/))) {
+        setCrumbs(["webhooks", "#/webhooks"], [`webhook ${shortId(match[1])}`, null]);
+        await draw(fleetcal.webhooks.deliveriesPage(match[1], params));
+      } else if (path === "/") await overviewPage(my);
       else {
         setCrumbs([path, null]);
-        throw new ApiError(404, { title: "No such page", detail: `The dashboard has no page ${path}: pages are the fleet (#/), a robot (#/robots/ID) and a run (#/runs/UUID).` });
+        throw new ApiError(404, {
+          title: "No such page",
+          detail: `The dashboard has no page ${path}: pages are the fleet (#/), a robot (#/robots/ID), two of its runs compared (#/robots/ID/compare), a run (#/runs/UUID) and, for admin keys, the webhooks (#/webhooks).`,
+        });
       }
     } catch (err) {
       if (my === generation) showError(err);
     }
+    await header;
     if (my === generation) app.dataset.ready = "true";
   }
 

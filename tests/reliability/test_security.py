@@ -44,7 +44,10 @@ def runs(api: Api) -> dict[str, str]:
 
 def extra_matrix(runs: dict[str, str]) -> list[tuple[str, str, object, set[str]]]:
     """The endpoints the service tests' matrix leaves out, and runs that exist."""
-    rows: list[tuple[str, str, object, set[str]]] = [("GET", "/v1/fleet", None, {"admin", "read"})]
+    rows: list[tuple[str, str, object, set[str]]] = [
+        ("GET", "/v1/fleet", None, {"admin", "read"}),
+        ("GET", "/v1/keys/me", None, EVERYONE),  # any valid key may ask what it may do
+    ]
     for robot, allowed in (("R1", EVERYONE), ("R2", NOT_R1)):
         run = runs[robot]
         rows += [

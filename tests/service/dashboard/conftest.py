@@ -13,8 +13,8 @@ import shutil
 import socket
 import threading
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -73,6 +73,16 @@ class ServedApp:
 @dataclass(frozen=True)
 class LiveApp(ServedApp):
     fleet: Fleet
+    keys: dict[str, str] = field(default_factory=dict)
+    """Secrets by `KEY_SCOPES` name."""
+    data_dir: Path | None = None
+
+
+KEY_SCOPES = {
+    "read": [Scope.READ],
+    "operator": [Scope.READ, Scope.OVERRIDE],  # an operator who accepts and rejects
+    "admin": [Scope.ADMIN],
+}
 
 
 def _free_socket() -> socket.socket:
@@ -83,22 +93,58 @@ def _free_socket() -> socket.socket:
     return sock
 
 
+FleetApps = Callable[..., contextlib.AbstractContextManager[LiveApp]]
+
+
 @pytest.fixture(scope="session")
-def live_app(
+def fleet_apps(
     tmp_path_factory: pytest.TempPathFactory,
     seed_recording: bytes,
     seed_images: dict[str, bytes],
+) -> FleetApps:
+    """Makes served apps of the seeded fleet, `with fleet_apps(name[, before_seed]) as app:`;
+    tests that change the fleet (accept, reject) use one of their own."""
+
+    def make(
+        name: str, before_seed: Callable[[Database], None] | None = None
+    ) -> contextlib.AbstractContextManager[LiveApp]:
+        folder = tmp_path_factory.mktemp(name)
+        return seeded_app(folder, seed_recording, seed_images, before_seed)
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def live_app(fleet_apps: FleetApps) -> Iterator[LiveApp]:
+    """The app (SQLite, local storage) served by uvicorn from a thread, with the fleet seeded; for
+    tests that only read it."""
+    with fleet_apps("live") as app:
+        yield app
+
+
+@contextlib.contextmanager
+def seeded_app(
+    data_dir: Path,
+    recording: bytes,
+    images: dict[str, bytes],
+    before_seed: Callable[[Database], None] | None = None,
 ) -> Iterator[LiveApp]:
-    """The app (SQLite, local storage) served by uvicorn from a thread, with the fleet seeded."""
-    settings = Settings(data_dir=tmp_path_factory.mktemp("live"))
+    """The seeded fleet in a new SQLite database under `data_dir`, served, with a key of each of
+    `KEY_SCOPES`; `before_seed` runs first (webhooks registered then get the fleet's events)."""
+    settings = Settings(data_dir=data_dir)
     db = Database.from_settings(settings)
     db.upgrade()
-    fleet = seed_fleet(db, make_storage(settings), seed_recording, seed_images)
+    if before_seed is not None:
+        before_seed(db)
+    fleet = seed_fleet(db, make_storage(settings), recording, images)
     with db.transaction() as session:
-        read_key = create_key(session, [Scope.READ], name="dashboard test").secret
+        keys = {
+            name: create_key(session, scopes, name=f"dashboard {name}").secret
+            for name, scopes in KEY_SCOPES.items()
+        }
     db.dispose()
     with serving(settings) as url:
-        yield LiveApp(url=url, read_key=read_key, fleet=fleet)
+        yield LiveApp(url=url, read_key=keys["read"], fleet=fleet, keys=keys, data_dir=data_dir)
 
 
 @contextlib.contextmanager
@@ -134,9 +180,15 @@ def _which(names: tuple[str, ...], env: str) -> str | None:
 
 
 @pytest.fixture(scope="module")
-def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
-    """Headless Chromium through chromedriver; skipped (with the reason) only if not installed,
-    and failed then under CI=true."""
+def download_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Where the module's browser saves downloads."""
+    return tmp_path_factory.mktemp("downloads")
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory: pytest.TempPathFactory, download_dir: Path) -> Iterator[Any]:
+    """Headless Chromium through chromedriver, saving downloads in `download_dir` without asking;
+    skipped (with the reason) only if not installed, and failed then under CI=true."""
     chromium = _which(CHROMIUM_NAMES, "FLEETCAL_CHROMIUM")
     driver_path = _which(CHROMEDRIVER_NAMES, "FLEETCAL_CHROMEDRIVER")
     if chromium is None or driver_path is None:
@@ -165,7 +217,14 @@ def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
         options.add_argument(argument)
     # The console log: a resource the page asks for and does not get (favicon) shows there.
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    options.add_experimental_option(
+        "prefs",
+        {"download.default_directory": str(download_dir), "download.prompt_for_download": False},
+    )
     driver = webdriver.Chrome(service=Service(executable_path=driver_path), options=options)
+    driver.execute_cdp_cmd(
+        "Browser.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(download_dir)}
+    )
     driver.set_page_load_timeout(60)
     try:
         yield driver

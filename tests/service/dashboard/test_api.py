@@ -203,7 +203,7 @@ def test_a_robot_key_reads_its_own_report(api: Api, fleet: Fleet) -> None:
 
 
 @sqlite_only
-@pytest.mark.parametrize("fmt", ["tf-static", "urdf", "extrinsics"])
+@pytest.mark.parametrize("fmt", ["tf-static", "urdf", "extrinsics", "autoware"])
 def test_text_exports_parse_back_to_the_result(api: Api, fleet: Fleet, fmt: str) -> None:
     response = api.client.get(
         f"/v1/runs/{fleet.repaired}/exports/{fmt}", headers=api.headers("read")

@@ -11,64 +11,14 @@ from typing import Any
 import httpx
 import pytest
 
+from tests.service.dashboard.browser import WAIT_S, open_page, screenshot, sign_in, wait_for
 from tests.service.dashboard.conftest import BIG_FLEET, LiveApp, ServedApp
-
-WAIT_S = 30
-
-
-def wait_for(browser: Any, css: str, count: int = 1) -> list[Any]:
-    """The elements matching `css` once there are at least `count` of them."""
-    from selenium.webdriver.common.by import By
-    from selenium.webdriver.support.ui import WebDriverWait
-
-    def found(driver: Any) -> list[Any] | bool:
-        elements = driver.find_elements(By.CSS_SELECTOR, css)
-        return elements if len(elements) >= count else False
-
-    result: list[Any] = WebDriverWait(browser, WAIT_S).until(found, f"no {count} x {css}")
-    return result
-
-
-def open_page(browser: Any, base_url: str, route: str) -> None:
-    """Go to the dashboard's `route` (e.g. `/robots/R1`) and wait until it has been drawn."""
-    from selenium.webdriver.support.ui import WebDriverWait
-
-    target = f"{base_url}/#{route}"
-    browser.execute_script(
-        "const a = document.getElementById('app'); if (a) a.dataset.ready = 'stale'"
-    )
-    if browser.current_url == target:
-        browser.refresh()
-    else:
-        browser.get(target)
-    WebDriverWait(browser, WAIT_S).until(
-        lambda driver: driver.execute_script(
-            "const a = document.getElementById('app');"
-            "return a.dataset.route === arguments[0] && a.dataset.ready === 'true'",
-            route,
-        ),
-        f"the dashboard did not draw {route}",
-    )
-
-
-def screenshot(browser: Any, artifacts: Path, name: str) -> Path:
-    """The whole page: the window is made as tall as the document first."""
-    height = browser.execute_script("return document.documentElement.scrollHeight")
-    browser.set_window_size(1400, max(900, min(int(height) + 40, 6000)))
-    path = artifacts / f"dashboard-{name}.png"
-    assert browser.save_screenshot(str(path)), path
-    browser.set_window_size(1400, 1000)
-    return path
 
 
 @pytest.fixture(scope="module")
 def signed_in(browser: Any, live_app: LiveApp) -> Any:
     """The browser with the read key entered once in the form (kept in session storage)."""
-    browser.get(f"{live_app.url}/")
-    field = wait_for(browser, "#api-key")[0]
-    field.send_keys(live_app.read_key)
-    wait_for(browser, "#key-form button")[0].click()
-    wait_for(browser, "table#fleet")
+    sign_in(browser, live_app.url, live_app.read_key)
     return browser
 
 
@@ -155,7 +105,7 @@ def test_a_passed_run_shows_its_verdict_checks_and_images(
         browser, "svg.chart.stages rect.bar", count=len(live_app.fleet.documents[run]["stages"])
     )
     assert stages
-    assert len(wait_for(browser, "#downloads button.download", count=5)) == 5
+    assert len(wait_for(browser, "#downloads button.download", count=6)) == 6
     assert wait_for(browser, 'tr[data-frame="lidar_rear"]')[0].text.count("[") >= 4
     screenshot(browser, artifacts_dir, "run-passed")
 

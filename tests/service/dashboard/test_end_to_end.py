@@ -21,7 +21,7 @@ from service.auth import create_key
 from service.db import Database
 from service.models import Scope
 from service.settings import Settings
-from tests.service.dashboard.test_browser import open_page, screenshot, wait_for
+from tests.service.dashboard.browser import open_page, screenshot, wait_for
 
 # Few iterations: this is about what the dashboard shows of a run, not about its accuracy.
 RUN_CONFIG = {"optimisation": {"max_iterations": 30}}

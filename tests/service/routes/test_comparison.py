@@ -76,3 +76,17 @@ def test_compare_needs_a_key_that_reads_the_robot(api: Api) -> None:
     query = f"from={runs[0]}&to={runs[1]}"
     response = api.client.get(f"/v1/robots/R2/compare?{query}", headers=api.headers("upload_r1"))
     assert response.status_code == 403 and problem_type(response) == "forbidden"
+
+
+def test_both_sides_say_whether_an_operator_overrode_the_verdict(api: Api) -> None:
+    first = finished(api, determined())
+    second = finished(api, determined(passed=False, rear_x=-0.43))
+    override = api.headers("override")
+    api.client.post(f"/v1/runs/{first}/reject", json={"reason": "x"}, headers=override)
+    api.client.post(f"/v1/runs/{second}/accept", json={"reason": "y"}, headers=override)
+    body = api.client.get(
+        f"/v1/robots/R1/compare?from={first}&to={second}", headers=api.headers("read")
+    ).json()
+    assert (body["from_run"]["passed"], body["from_run"]["accepted"]) == (True, False)
+    assert (body["to_run"]["passed"], body["to_run"]["accepted"]) == (False, True)
+    assert body["lidars"]["lidar_rear"]["translation_m"] == pytest.approx(0.02, abs=1e-9)

@@ -6,6 +6,9 @@ from __future__ import annotations
 import csv
 import io
 
+import pytest
+
+from service.routes import csv_exports
 from tests.service.conftest import Api, problem_type
 from tests.service.routes.accepted import determined, finished
 
@@ -61,3 +64,44 @@ def test_csv_errors_are_problems(api: Api) -> None:
     for path, key, status, slug in cases:
         response = api.client.get(path, headers=api.headers(key))
         assert (response.status_code, problem_type(response)) == (status, slug), path
+
+
+def test_both_csvs_follow_an_operators_accept_and_reject(api: Api) -> None:
+    good = finished(api, determined())
+    failed = finished(api, determined(passed=False, rear_x=-0.43))
+    override = api.headers("override")
+    accepted = api.client.post(f"/v1/runs/{failed}/accept", json={"reason": "x"}, headers=override)
+    assert accepted.status_code == 200, accepted.text
+
+    def csvs() -> tuple[list[dict[str, str]], list[dict[str, str]]]:
+        read = api.headers("read")
+        history = api.client.get("/v1/robots/R1/history.csv", headers=read)
+        fleet = api.client.get("/v1/fleet/calibrations.csv", headers=read)
+        return _rows(history.text), _rows(fleet.text)
+
+    history, fleet = csvs()
+    assert [(r["run_id"], r["passed"], r["accepted"]) for r in history[::2]] == [
+        (good, "True", "True"),
+        (failed, "False", "True"),
+    ]
+    assert {r["run_id"] for r in fleet} == {failed}
+    assert float(next(r for r in fleet if r["frame"] == "lidar_rear")["tx"]) == -0.43
+    rejected = api.client.post(f"/v1/runs/{failed}/reject", json={"reason": "y"}, headers=override)
+    assert rejected.status_code == 200, rejected.text
+    history, fleet = csvs()
+    assert [r["accepted"] for r in history] == ["True", "True", "False", "False"]
+    assert {r["run_id"] for r in fleet} == {good}
+
+
+def test_a_history_longer_than_a_page_is_all_there_once(
+    api: Api, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The CSV reads the history in pages of `_PAGE` rows; 3 makes 5 runs x 2 LiDARs four pages.
+    monkeypatch.setattr(csv_exports, "_PAGE", 3)
+    runs = [finished(api, determined(rear_x=-0.41 - i / 1000)) for i in range(5)]
+    response = api.client.get("/v1/robots/R1/history.csv", headers=api.headers("read"))
+    rows = _rows(response.text)
+    assert [(r["run_id"], r["frame"]) for r in rows] == [
+        (run, frame) for run in runs for frame in ("lidar_front", "lidar_rear")
+    ]
+    assert [float(r["tx"]) for r in rows[1::2]] == [-0.41 - i / 1000 for i in range(5)]
