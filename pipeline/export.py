@@ -14,9 +14,6 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
-from xml.sax.saxutils import quoteattr
-
-import numpy as np
 
 from pipeline.errors import BadInputError
 
@@ -140,6 +137,9 @@ def calibrated_extrinsics(
 
 
 def _extrinsic(base: str, frame: str, entry: Mapping[str, Any], is_reference: bool) -> Extrinsic:
+    # numpy and xml.sax here, not at the top: `fleetcal --help` imports this module for its enums.
+    import numpy as np
+
     pose = entry["calibrated"]
     try:
         translation = tuple(float(v) for v in pose["translation"])
@@ -252,6 +252,8 @@ def urdf_snippet(
     Valid by itself (check_urdf); to merge into a robot description, copy the LiDAR links and
     joints (the base link is declared only so the snippet stands alone).
     """
+    from xml.sax.saxutils import quoteattr
+
     extrinsics = calibrated_extrinsics(document, allow_failed=allow_failed)
     base = extrinsics[0].parent
     lines = ['<?xml version="1.0"?>']

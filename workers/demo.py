@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from service.cli import DataDirOption, settings_for, startup_errors
-from service.startup import where_state_lives
 
 if TYPE_CHECKING:
     import httpx
@@ -54,6 +53,7 @@ def demo(
     seed: Annotated[int, typer.Option("--seed")] = 0,
 ) -> None:
     """Run the main job end to end: embedded service, synthetic recording, upload, verdict."""
+    from service.startup import where_state_lives  # pydantic: not for every `fleetcal` start
     from workers.commands import configure_logging, print_first_admin_key, stop_signals
     from workers.embedded import EmbeddedService, first_admin_key
 

@@ -21,7 +21,7 @@ from pipeline.config import PipelineConfig, config_from_mapping
 from pipeline.errors import ConfigError, PipelineError
 from pipeline.io import read_recording
 from pipeline.problem import CalibrationProblem
-from pipeline.report import render_report
+from pipeline.report import load_renderer, render_report
 from pipeline.result import result_document
 from service.reports import store_report_images
 from service.settings import Settings
@@ -31,6 +31,10 @@ from workers.context import JobSpec
 from workers.pool import Report
 
 log = logging.getLogger(__name__)
+
+# The fork server imports this module once: matplotlib comes with every child then, not inside
+# each child's first report.
+load_renderer()
 
 _SUFFIXES = {
     "mcap": ".mcap",

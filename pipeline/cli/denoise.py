@@ -1,20 +1,41 @@
-"""`fleetcal denoise`: run stage 1 on one cloud file and write its keep mask."""
+"""`fleetcal denoise`: run stage 1 on one cloud file and write its keep mask.
+
+The options' choices and defaults are literals, not read from `DenoiseConfig`: importing
+`pipeline.denoise` loads numpy and pydantic, which every `fleetcal` start (even `--help`) would
+then pay for. tests/pipeline/cli/test_denoise.py checks that they agree with the config.
+"""
 
 from __future__ import annotations
 
 import enum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
 import typer
-from numpy.typing import NDArray
 
 from pipeline.cli.common import user_errors
-from pipeline.denoise import DenoiseConfig, DenoiseMethod
 from pipeline.errors import BadInputError, ConfigError
 
-_DEFAULTS = DenoiseConfig()
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+
+class Method(enum.StrEnum):
+    """The values of `pipeline.denoise.DenoiseMethod`, in its order."""
+
+    PATTERN = "pattern"
+    PROPOSED = "proposed"
+    FLOORED = "floored"
+    SOR = "sor"
+    DSOR = "dsor"
+
+
+DEFAULT_METHOD = Method.PATTERN
+DEFAULT_K = 20
+DEFAULT_CS = 0.01
+DEFAULT_CR = 3.0
+"""`DenoiseConfig()`'s `method`, `k`, `cs` and `cr`."""
 
 
 class Axis(enum.StrEnum):
@@ -41,20 +62,21 @@ def denoise_command(
     output: Annotated[
         Path, typer.Option("--output", "-o", help="where to write the (N,) bool mask, True = keep")
     ],
-    method: Annotated[DenoiseMethod, typer.Option(help="which filter")] = _DEFAULTS.method,
-    k: Annotated[int, typer.Option(help="neighbours per point")] = _DEFAULTS.k,
-    cs: Annotated[float, typer.Option(help="C_s: H_g = mu + sigma * C_s")] = _DEFAULTS.cs,
-    cr: Annotated[float, typer.Option(help="C_r: dynamic threshold factor")] = _DEFAULTS.cr,
+    method: Annotated[Method, typer.Option(help="which filter")] = DEFAULT_METHOD,
+    k: Annotated[int, typer.Option(help="neighbours per point")] = DEFAULT_K,
+    cs: Annotated[float, typer.Option(help="C_s: H_g = mu + sigma * C_s")] = DEFAULT_CS,
+    cr: Annotated[float, typer.Option(help="C_r: dynamic threshold factor")] = DEFAULT_CR,
     axis: Annotated[Axis, typer.Option(help="the LiDAR's optical axis (Livox: x)")] = Axis.X,
 ) -> None:
     """Remove bleeding points from one LiDAR cloud (stage 1) and save which points to keep."""
+    import numpy as np
     from pydantic import ValidationError
 
-    from pipeline.denoise import denoise
+    from pipeline.denoise import DenoiseConfig, DenoiseMethod, denoise
 
     with user_errors():
         try:
-            config = DenoiseConfig(method=method, k=k, cs=cs, cr=cr)
+            config = DenoiseConfig(method=DenoiseMethod(method.value), k=k, cs=cs, cr=cr)
         except ValidationError as err:
             problems = "; ".join(f"--{e['loc'][0]}: {e['msg']}" for e in err.errors())
             raise ConfigError(f"invalid option: {problems}") from None
@@ -77,6 +99,7 @@ def denoise_command(
 
 def read_cloud(path: Path) -> NDArray[np.float64]:
     """The (N, 3) points of a .npy, .pcd or .ply file; `BadInputError` if it cannot give them."""
+    import numpy as np
 
     if not path.is_file():
         raise BadInputError(f"no such file: {path}")

@@ -5,7 +5,11 @@ each LiDAR in its own colour in both panels."""
 from __future__ import annotations
 
 import io
+import os
+import subprocess
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,6 +29,7 @@ from pipeline.report import (
     lidar_colour,
     map_extent,
     map_poses,
+    points_outside,
     render,
     report_input,
     robot_surroundings,
@@ -290,3 +295,36 @@ def test_grid_counts_are_histogram2d_counts_edges_and_outside_included() -> None
     assert counts.shape == (30, 7)
     assert counts.sum() == len(inside) + len(edges)
     np.testing.assert_array_equal(counts, expected)
+
+
+def test_points_outside_counts_only_beyond_the_box_edges_included() -> None:
+    box = (0.0, 10.0, 0.0, 10.0)
+    inside = np.array([[0.0, 0.0, 1.0], [10.0, 10.0, 1.0], [5.0, 5.0, 1.0]])  # edges count in
+    beyond = np.array([[13.0, 14.0, 0.0], [-1.0, 5.0, 0.0]])
+
+    assert points_outside([inside], box) == (0.0, 0.0)
+    assert points_outside([inside, beyond, np.zeros((0, 3))], box) == (2 / 5, 5.0)
+    assert points_outside([np.zeros((0, 3))], box) == (0.0, 0.0)
+
+
+def test_importing_the_report_leaves_matplotlib_to_load_renderer() -> None:
+    # `pipeline.map_export` and the service import this module for its colours and names; the
+    # service's pool children preload matplotlib on purpose, through `load_renderer`.
+    probe = (
+        "import sys\n"
+        "import pipeline.report as report\n"
+        "before = 'matplotlib' in sys.modules\n"
+        "report.load_renderer()\n"
+        "print(before, all(m in sys.modules for m in "
+        "('matplotlib.figure', 'matplotlib.backends.backend_agg')))\n"
+    )
+    repo = Path(__file__).resolve().parents[2]
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(repo), os.environ.get("PYTHONPATH", "")]),
+    }
+    done = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, env=env, timeout=120
+    )
+
+    assert done.stdout.split() == ["False", "True"], done.stderr

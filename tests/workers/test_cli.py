@@ -11,8 +11,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
-
-import pytest
+from typing import Any
 
 from pipeline.io.writer import WriterFormat
 from tests.pipeline.io.recordings import Spec, write_recording
@@ -34,6 +33,19 @@ NEVER_FOR_HELP_OR_INSPECT = (
     "service.db",
 )
 
+# The numerical and service stacks, and typer's rich help: none is needed to list the commands.
+NEVER_TO_BUILD_THE_CLI = (
+    "numpy",
+    "scipy",
+    "open3d",
+    "mujoco",
+    "matplotlib",
+    "pydantic",
+    "sqlalchemy",
+    "fastapi",
+    "rich",
+)
+
 # Runs `fleetcal ARGS` in-process, then prints which of the watched modules got imported.
 _PROBE = """
 import json, sys
@@ -51,15 +63,58 @@ print("\\nLOADED " + json.dumps({"code": code, "loaded": loaded}))
 """
 
 
+# Imports the CLI and builds every command's click object (typer does it on the first call),
+# then prints which of the watched modules got imported.
+_BUILD_PROBE = """
+import json, sys
+import typer.main
+from workers.cli import app
+typer.main.get_command(app)
+watched = json.loads(sys.argv[1])
+loaded = sorted(m for m in watched if m in sys.modules)
+print("\\nLOADED " + json.dumps({"code": 0, "loaded": loaded}))
+"""
+
+# Runs `fleetcal CMD --help` in-process for every command and sub-command of the built app.
+_EVERY_HELP_PROBE = """
+import json, sys
+import typer.main
+from workers.cli import app
+
+def paths(command, path):
+    yield path
+    for name, sub in sorted(getattr(command, "commands", {}).items()):
+        yield from paths(sub, [*path, name])
+
+root = typer.main.get_command(app)
+shown = []
+for path in paths(root, []):
+    try:
+        root.main([*path, "--help"], prog_name="fleetcal", standalone_mode=False)
+    except SystemExit as exit:
+        if exit.code not in (0, None):
+            raise
+    shown.append(" ".join(path))
+watched = json.loads(sys.argv[1])
+loaded = sorted(m for m in watched if m in sys.modules)
+print("\\nLOADED " + json.dumps({"code": 0, "loaded": loaded, "shown": shown}))
+"""
+
+
 def imported_by(*args: str, watched: tuple[str, ...]) -> list[str]:
     """The modules of `watched` that `fleetcal ARGS` imported; fails if the command failed."""
+    return list(_probe(_PROBE, *args, watched=watched)["loaded"])
+
+
+def _probe(source: str, *args: str, watched: tuple[str, ...]) -> dict[str, Any]:
+    """Run `source` in a fresh interpreter and return the report it printed last."""
     repo = Path(__file__).resolve().parents[2]
     env = {
         **os.environ,
         "PYTHONPATH": os.pathsep.join([str(repo), os.environ.get("PYTHONPATH", "")]),
     }
     done = subprocess.run(
-        [sys.executable, "-c", _PROBE, json.dumps(watched), *args],
+        [sys.executable, "-c", source, json.dumps(watched), *args],
         capture_output=True,
         text=True,
         env=env,
@@ -68,14 +123,30 @@ def imported_by(*args: str, watched: tuple[str, ...]) -> list[str]:
     )
     last = done.stdout.rstrip().rsplit("\nLOADED ", 1)
     assert len(last) == 2, f"probe printed no result:\n{done.stdout}\n{done.stderr}"
-    report = json.loads(last[1])
+    report: dict[str, Any] = json.loads(last[1])
     assert report["code"] in (0, None), f"fleetcal {' '.join(args)} failed:\n{done.stderr}"
-    return list(report["loaded"])
+    return report
 
 
-@pytest.mark.parametrize("args", [("--help",), ("inspect", "--help"), ("calibrate", "--help")])
-def test_help_loads_no_scipy_nor_heavy_stack(args: tuple[str, ...]) -> None:
-    assert imported_by(*args, watched=(*NEVER_FOR_HELP_OR_INSPECT, "scipy")) == []
+def test_building_the_cli_imports_no_numerical_nor_service_stack() -> None:
+    # What `fleetcal --help` costs is what this import graph holds: typer and the command
+    # modules' own top levels (option defaults are literals, heavy imports are in the bodies).
+    assert _probe(_BUILD_PROBE, watched=NEVER_TO_BUILD_THE_CLI)["loaded"] == []
+
+
+def test_root_help_imports_no_numerical_nor_service_stack() -> None:
+    assert imported_by("--help", watched=NEVER_TO_BUILD_THE_CLI) == []
+
+
+def test_every_commands_help_imports_no_numerical_stack() -> None:
+    # pydantic is not watched: typer itself coerces a sub-command's parameters with it.
+    watched = tuple(m for m in NEVER_TO_BUILD_THE_CLI if m != "pydantic")
+    report = _probe(_EVERY_HELP_PROBE, watched=(*watched, *NEVER_FOR_HELP_OR_INSPECT))
+
+    assert report["loaded"] == []
+    assert {"calibrate", "denoise", "export", "inspect", "keys create", "runs list"} <= set(
+        report["shown"]
+    )
 
 
 def test_inspect_loads_no_renderer_simulator_nor_service(tmp_path: Path) -> None:

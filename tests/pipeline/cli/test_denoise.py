@@ -113,3 +113,20 @@ def test_an_unknown_format_and_an_unwritable_output_exit_2(tmp_path: Path) -> No
 
     assert unknown.exit_code == 2 and "unknown cloud format '.csv'" in unknown.output
     assert unwritable.exit_code == 2 and "cannot write the mask" in unwritable.output
+
+
+def test_option_choices_and_defaults_are_the_configs() -> None:
+    # The CLI spells them out so that `fleetcal` starts without numpy and pydantic; they must
+    # still say what `DenoiseConfig` does.
+    config = DenoiseConfig()
+    options = {
+        param.name: param for param in typer.main.get_command(app).commands["denoise"].params
+    }
+
+    assert [m.value for m in denoise_cli.Method] == [m.value for m in DenoiseMethod]
+    assert [options[name].default for name in ("method", "k", "cs", "cr")] == [
+        config.method.value,
+        config.k,
+        config.cs,
+        config.cr,
+    ]
