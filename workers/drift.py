@@ -42,7 +42,7 @@ def compare(result: CalibrationResult, reference: Reference) -> DriftEvidence:
         if frame not in calibrated:
             missing.append(frame)
             continue
-        # The pose as `result.json` writes it (a unit quaternion with w >= 0), as the robot reads it.
+        # The pose as `result.json` writes it (a unit quaternion, w >= 0): what the robot reads.
         written = from_translation_xyzw(*to_translation_xyzw(calibrated[frame]))
         lidars[frame] = pose_difference(from_translation_xyzw(translation, rotation), written)
     return DriftEvidence(
