@@ -1,13 +1,17 @@
 """The verdict: checks of a calibration against tolerances, each with its value, limit and outcome.
 
 Tolerances live in `VerdictConfig`; the service passes a robot model's tolerance profile as one.
+Evidence the pipeline cannot know (the robot's last accepted calibration: drift) is judged by the
+same checks (`with_drift`), so a verdict is only ever made here, never edited after.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from datetime import datetime
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -50,16 +54,6 @@ class Check:
 
 
 @dataclass(frozen=True)
-class Verdict:
-    passed: bool
-    checks: tuple[Check, ...]
-
-    @property
-    def failed(self) -> tuple[Check, ...]:
-        return tuple(check for check in self.checks if not check.passed)
-
-
-@dataclass(frozen=True)
 class LidarEvidence:
     """What the verdict needs to know of one LiDAR."""
 
@@ -73,9 +67,53 @@ class LidarEvidence:
     deviation_rotation_deg: float
 
 
-def _at_most(name: str, value: float, limit: float, detail: str) -> Check:
-    passed = math.isfinite(value) and value <= limit
-    return Check(name, value, limit, passed, "" if passed else detail)
+@dataclass(frozen=True)
+class DriftEvidence:
+    """The calibrated poses against reference poses, measured after the calibration (the service
+    knows the robot's last accepted calibration, or its model's design), with the profile's limits.
+
+    `lidars`: per LiDAR the reference knows and the run calibrated, translation (m) and rotation
+    (deg) from the reference pose. `missing`: the LiDARs it knows that the run did not calibrate;
+    each fails a check when a limit is set (the robot no longer matches). `run_id` and
+    `measured_at` say which calibration the reference is (reported, not judged).
+    """
+
+    against: Literal["last_accepted", "design"]
+    lidars: Mapping[str, tuple[float, float]]
+    missing: tuple[str, ...] = ()
+    max_translation_m: float | None = None
+    max_rotation_deg: float | None = None
+    run_id: str | None = None
+    measured_at: datetime | None = None
+
+    @property
+    def limited(self) -> bool:
+        return self.max_translation_m is not None or self.max_rotation_deg is not None
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """Everything a verdict is judged on. It stays with the verdict so that evidence found later
+    (drift, in the worker) is judged with the rest (`with_drift`), never added to a verdict."""
+
+    metric_error_m: float
+    converged: bool
+    iterations: int
+    max_iterations: int
+    lidars: tuple[LidarEvidence, ...]
+    drift: DriftEvidence | None = None
+
+
+@dataclass(frozen=True)
+class Verdict:
+    passed: bool
+    checks: tuple[Check, ...]
+    evidence: Evidence | None = field(default=None, compare=False, repr=False)
+    config: VerdictConfig | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def failed(self) -> tuple[Check, ...]:
+        return tuple(check for check in self.checks if not check.passed)
 
 
 def judge(
@@ -85,92 +123,171 @@ def judge(
     max_iterations: int,
     lidars: Sequence[LidarEvidence],
     config: VerdictConfig,
+    *,
+    drift: DriftEvidence | None = None,
 ) -> Verdict:
     """Run every check; the verdict passes when all of them pass."""
+    evidence = Evidence(metric_error_m, converged, iterations, max_iterations, tuple(lidars), drift)
+    return judge_evidence(evidence, config)
+
+
+def judge_evidence(evidence: Evidence, config: VerdictConfig) -> Verdict:
+    """`judge` on an `Evidence` record: the run's checks, each LiDAR's, then the drift checks."""
+    checks = [
+        *_run_checks(evidence, config),
+        *(check for lidar in evidence.lidars for check in _lidar_checks(lidar, config)),
+        *(_drift_checks(evidence.drift) if evidence.drift is not None else ()),
+    ]
+    return Verdict(all(check.passed for check in checks), tuple(checks), evidence, config)
+
+
+def with_drift(verdict: Verdict, drift: DriftEvidence) -> Verdict:
+    """`verdict` judged again on its evidence and `drift`: the same checks, then drift's."""
+    if verdict.evidence is None or verdict.config is None:
+        raise ValueError("the verdict keeps no evidence (it was not made by judge): judge it anew")
+    return judge_evidence(replace(verdict.evidence, drift=drift), verdict.config)
+
+
+def _at_most(name: str, value: float, limit: float, detail: str) -> Check:
+    passed = math.isfinite(value) and value <= limit
+    return Check(name, value, limit, passed, "" if passed else detail)
+
+
+def _run_checks(evidence: Evidence, config: VerdictConfig) -> list[Check]:
+    error = evidence.metric_error_m
     checks = [
         _at_most(
             "metric_error",
-            metric_error_m,
+            error,
             config.max_metric_error_m,
-            f"the maps disagree by {metric_error_m:.4f} m on average "
-            f"(limit {config.max_metric_error_m} m)",
+            f"the maps disagree by {error:.4f} m on average (limit {config.max_metric_error_m} m)",
         )
     ]
     if config.require_convergence:
+        converged, limit = evidence.converged, evidence.max_iterations
         checks.append(
             Check(
                 "convergence",
-                float(iterations),
-                float(max_iterations),
+                float(evidence.iterations),
+                float(limit),
                 converged,
-                "" if converged else f"no convergence within {max_iterations} iterations",
+                "" if converged else f"no convergence within {limit} iterations",
             )
         )
-    for lidar in lidars:
-        enough = lidar.object_points >= config.min_object_points
+    return checks
+
+
+def _lidar_checks(lidar: LidarEvidence, config: VerdictConfig) -> list[Check]:
+    enough = lidar.object_points >= config.min_object_points
+    checks = [
+        Check(
+            f"object_points:{lidar.frame}",
+            float(lidar.object_points),
+            float(config.min_object_points),
+            enough,
+            ""
+            if enough
+            else f"{lidar.frame} saw too few object points; place objects "
+            "(about 0.25 m tall) in its view during the stops",
+        )
+    ]
+    if lidar.is_reference:
+        return checks
+    missing = lidar.undetermined
+    checks.append(
+        Check(
+            f"determined:{lidar.frame}",
+            float(len(missing)),
+            0.0,
+            not missing,
+            f"the data do not determine {', '.join(missing)} of {lidar.frame}" if missing else "",
+            missing,
+        )
+    )
+    return checks + _uncertainty_checks(lidar, config) + _deviation_checks(lidar, config)
+
+
+def _uncertainty_checks(lidar: LidarEvidence, config: VerdictConfig) -> list[Check]:
+    translation, rotation = max(lidar.stddev_translation_m), max(lidar.stddev_rotation_deg)
+    return [
+        _at_most(
+            f"uncertainty_translation:{lidar.frame}",
+            translation,
+            config.max_translation_stddev_m,
+            f"{lidar.frame}'s position is uncertain by up to {translation:.4f} m (1 sigma)",
+        ),
+        _at_most(
+            f"uncertainty_rotation:{lidar.frame}",
+            rotation,
+            config.max_rotation_stddev_deg,
+            f"{lidar.frame}'s orientation is uncertain by up to {rotation:.3f} deg (1 sigma)",
+        ),
+    ]
+
+
+def _deviation_checks(lidar: LidarEvidence, config: VerdictConfig) -> list[Check]:
+    """The change from the initial extrinsics, where the config limits it."""
+    checks = []
+    if config.max_deviation_translation_m is not None:
         checks.append(
-            Check(
-                f"object_points:{lidar.frame}",
-                float(lidar.object_points),
-                float(config.min_object_points),
-                enough,
-                ""
-                if enough
-                else f"{lidar.frame} saw too few object points; place objects "
-                "(about 0.25 m tall) in its view during the stops",
+            _at_most(
+                f"deviation_translation:{lidar.frame}",
+                lidar.deviation_translation_m,
+                config.max_deviation_translation_m,
+                f"{lidar.frame} moved {lidar.deviation_translation_m:.3f} m from its initial pose",
             )
         )
-        if lidar.is_reference:
+    if config.max_deviation_rotation_deg is not None:
+        checks.append(
+            _at_most(
+                f"deviation_rotation:{lidar.frame}",
+                lidar.deviation_rotation_deg,
+                config.max_deviation_rotation_deg,
+                f"{lidar.frame} turned {lidar.deviation_rotation_deg:.2f} deg from its "
+                "initial pose",
+            )
+        )
+    return checks
+
+
+# Check names are `<what>:<frame>`; "deviation" above already means the change from the initial
+# extrinsics, hence "design" for the comparison with the design. The service's webhooks select
+# `drift_*` checks (`service.outbox`).
+_DRIFT_KIND = {"last_accepted": "drift", "design": "design"}
+_DRIFT_QUESTION = {
+    "drift": "last accepted calibration (limit {limit} {unit}): has its mount moved or been hit?",
+    "design": "design pose (limit {limit} {unit}): is it mounted as the model says?",
+}
+
+
+def _drift_checks(drift: DriftEvidence) -> list[Check]:
+    """Per LiDAR the reference knows, in frame order: its translation and rotation from the
+    reference pose against each limit set, or, when it was not calibrated, a failed check."""
+    kind = _DRIFT_KIND[drift.against]
+    checks = []
+    for frame in sorted({*drift.lidars, *drift.missing}):
+        if frame not in drift.lidars:
+            if drift.limited:
+                reference = drift.against.replace("_", " ")
+                checks.append(
+                    Check(
+                        f"{kind}_missing:{frame}",
+                        math.nan,
+                        math.nan,
+                        False,
+                        f"{frame} is in the {reference} extrinsics but was not calibrated",
+                    )
+                )
             continue
-        missing = lidar.undetermined
-        checks.append(
-            Check(
-                f"determined:{lidar.frame}",
-                float(len(missing)),
-                0.0,
-                not missing,
-                f"the data do not determine {', '.join(missing)} of {lidar.frame}"
-                if missing
-                else "",
-                missing,
-            )
-        )
-        checks.append(
-            _at_most(
-                f"uncertainty_translation:{lidar.frame}",
-                max(lidar.stddev_translation_m),
-                config.max_translation_stddev_m,
-                f"{lidar.frame}'s position is uncertain by up to "
-                f"{max(lidar.stddev_translation_m):.4f} m (1 sigma)",
-            )
-        )
-        checks.append(
-            _at_most(
-                f"uncertainty_rotation:{lidar.frame}",
-                max(lidar.stddev_rotation_deg),
-                config.max_rotation_stddev_deg,
-                f"{lidar.frame}'s orientation is uncertain by up to "
-                f"{max(lidar.stddev_rotation_deg):.3f} deg (1 sigma)",
-            )
-        )
-        if config.max_deviation_translation_m is not None:
-            checks.append(
-                _at_most(
-                    f"deviation_translation:{lidar.frame}",
-                    lidar.deviation_translation_m,
-                    config.max_deviation_translation_m,
-                    f"{lidar.frame} moved {lidar.deviation_translation_m:.3f} m from its "
-                    "initial pose",
-                )
-            )
-        if config.max_deviation_rotation_deg is not None:
-            checks.append(
-                _at_most(
-                    f"deviation_rotation:{lidar.frame}",
-                    lidar.deviation_rotation_deg,
-                    config.max_deviation_rotation_deg,
-                    f"{lidar.frame} turned {lidar.deviation_rotation_deg:.2f} deg from its "
-                    "initial pose",
-                )
-            )
-    return Verdict(passed=all(check.passed for check in checks), checks=tuple(checks))
+        distance_m, angle_deg = drift.lidars[frame]
+        for name, value, limit, unit in (
+            (f"{kind}_translation:{frame}", distance_m, drift.max_translation_m, "m"),
+            (f"{kind}_rotation:{frame}", angle_deg, drift.max_rotation_deg, "deg"),
+        ):
+            if limit is None:
+                continue
+            passed = value <= limit
+            question = _DRIFT_QUESTION[kind].format(limit=limit, unit=unit)
+            detail = "" if passed else f"{frame} is {value:.4g} {unit} away from its {question}"
+            checks.append(Check(name, value, limit, passed, detail))
+    return checks

@@ -23,7 +23,7 @@ from service.models import (
 )
 
 DRIFT_CHECK_PREFIX = "drift_"
-"""`workers.drift` names its checks against the last accepted calibration `drift_*:<frame>`."""
+"""`pipeline.verdict` names its checks against the last accepted calibration `drift_*:<frame>`."""
 DEFAULT_MAX_ATTEMPTS = 12
 """Tries per delivery; with the workers' doubling backoff (capped) that spans hours, enough for a
 receiver restarted or redeployed, not so long that a dead URL is retried forever."""

@@ -19,6 +19,7 @@ from sqlalchemy import case, func, select, true, tuple_, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session, aliased
 
+from pipeline.result_model import ResultDocument
 from service import outbox
 from service.models import (
     EventType,
@@ -30,7 +31,6 @@ from service.models import (
     RunStatus,
     ToleranceProfile,
 )
-from service.schemas import ResultDocument
 
 
 class RepositoryError(Exception):
@@ -299,19 +299,7 @@ def store_result(
     worker never writes a second result. LiDARs without a `calibrated` pose (undetermined by the
     data) keep their entry in the document but get no extrinsics row.
     """
-    try:
-        json.dumps(document, allow_nan=False)
-    except ValueError as err:
-        raise InvalidResultError(
-            "result document holds NaN or infinity; a failure must be a "
-            "failed check, never a non-finite number"
-        ) from err
-    except TypeError as err:
-        raise InvalidResultError(f"result document is not JSON: {err}") from err
-    try:
-        parsed = ResultDocument.model_validate(document)
-    except ValidationError as err:
-        raise InvalidResultError(f"result document does not follow result.json: {err}") from err
+    parsed = _result_document(document)
     run = _lock_run(session, run_id, lease_owner)
     if session.get(Result, run_id) is not None:
         raise RunFinishedError(f"run {run_id} already has a result")
@@ -332,14 +320,40 @@ def store_result(
     )
     session.add(result)
     session.flush()  # the extrinsics rows refer to it
+    session.add_all(_extrinsic_rows(run, parsed))
+    _finish(run, RunStatus.SUCCEEDED, now, error=None)
+    outbox.enqueue_events(session, run, outbox.result_events(result))
+    session.flush()
+    return result
+
+
+def _result_document(document: dict[str, Any]) -> ResultDocument:
+    """`document` as the `result.json` model, or `InvalidResultError` saying what is wrong."""
+    try:
+        json.dumps(document, allow_nan=False)
+    except ValueError as err:
+        raise InvalidResultError(
+            "result document holds NaN or infinity; a failure must be a "
+            "failed check, never a non-finite number"
+        ) from err
+    except TypeError as err:
+        raise InvalidResultError(f"result document is not JSON: {err}") from err
+    try:
+        return ResultDocument.model_validate(document)
+    except ValidationError as err:
+        raise InvalidResultError(f"result document does not follow result.json: {err}") from err
+
+
+def _extrinsic_rows(run: Run, parsed: ResultDocument) -> list[LidarExtrinsic]:
+    """One row per calibrated LiDAR, in frame order: the series of history and drift."""
+    passed = parsed.verdict.passed
+    rows = []
     for frame, lidar in sorted(parsed.lidars.items()):
-        if lidar.calibrated is None:
+        pose = lidar.calibrated
+        if pose is None:
             continue
-        (tx, ty, tz), (qx, qy, qz, qw) = (
-            lidar.calibrated.translation,
-            lidar.calibrated.rotation_xyzw,
-        )
-        session.add(
+        (tx, ty, tz), (qx, qy, qz, qw) = pose.translation, pose.rotation_xyzw
+        rows.append(
             LidarExtrinsic(
                 run_id=run.id,
                 robot_id=run.robot_id,
@@ -355,13 +369,10 @@ def store_result(
                 qy=qy,
                 qz=qz,
                 qw=qw,
-                stddev=lidar.stddev,
+                stddev=lidar.stddev.model_dump(mode="json"),
             )
         )
-    _finish(run, RunStatus.SUCCEEDED, now, error=None)
-    outbox.enqueue_events(session, run, outbox.result_events(result))
-    session.flush()
-    return result
+    return rows
 
 
 def fail_run(
@@ -550,52 +561,8 @@ def fleet(session: Session, *, limit: int, after_id: str | None) -> FleetPage:
     `ix_runs_robot_created` and `ix_results_robot_passed`: one index probe per robot, where a
     window over every run would sort the whole table.
     """
-    newest_run = aliased(Run, name="newest_run")
-    newest_passed = aliased(Result, name="newest_passed")
-    latest_run_id = (
-        select(newest_run.id)
-        .where(newest_run.robot_id == Robot.id)
-        .order_by(newest_run.created_at.desc(), newest_run.id.desc())
-        .limit(1)
-        .scalar_subquery()
-    )
-    accepted_run_id = (
-        select(newest_passed.run_id)
-        .where(newest_passed.robot_id == Robot.id, newest_passed.accepted.is_(True))
-        .order_by(newest_passed.measured_at.desc(), newest_passed.run_id.desc())
-        .limit(1)
-        .scalar_subquery()
-    )
-    latest = (
-        select(
-            Robot.id.label("robot_id"),
-            Robot.model,
-            Robot.meta.label("robot_metadata"),
-            Robot.created_at.label("robot_created_at"),
-            Robot.updated_at.label("robot_updated_at"),
-            *(column.label(f"run_{column.key}") for column in _RUN_COLUMNS),
-            Result.passed,
-            Result.metric_error_final,
-            accepted_run_id.label("accepted_run_id"),
-        )
-        .select_from(Robot)
-        .outerjoin(Run, Run.id == latest_run_id)
-        .outerjoin(Result, Result.run_id == Run.id)
-        .cte("latest")
-    )
-    status, passed = latest.c.run_status, latest.c.passed
-
-    def count_of(condition: Any) -> Any:
-        return func.coalesce(func.sum(case((condition, 1), else_=0)), 0)
-
-    totals = select(
-        func.count().label("robots"),
-        count_of((status == RunStatus.SUCCEEDED) & passed.is_(True)).label("latest_passed"),
-        count_of((status == RunStatus.FAILED) | passed.is_(False)).label("latest_failed"),
-        count_of(status.in_([RunStatus.QUEUED, RunStatus.RUNNING])).label("in_progress"),
-        count_of(latest.c.run_id.is_(None)).label("no_run"),
-        count_of(latest.c.accepted_run_id.is_not(None)).label("with_accepted"),
-    ).cte("totals")
+    latest = _latest_per_robot()
+    totals = _fleet_totals(latest)
     page_stmt = select(latest).order_by(latest.c.robot_id).limit(limit)
     if after_id is not None:
         page_stmt = page_stmt.where(latest.c.robot_id > after_id)
@@ -619,6 +586,61 @@ def fleet(session: Session, *, limit: int, after_id: str | None) -> FleetPage:
     return FleetPage(
         rows=[_fleet_row(row) for row in rows if row["robot_id"] is not None], totals=totals_row
     )
+
+
+def _latest_per_robot() -> Any:
+    """The CTE `latest`: every robot's columns, its newest run with that run's verdict, and the
+    id of its newest accepted result's run."""
+    newest_run = aliased(Run, name="newest_run")
+    newest_passed = aliased(Result, name="newest_passed")
+    latest_run_id = (
+        select(newest_run.id)
+        .where(newest_run.robot_id == Robot.id)
+        .order_by(newest_run.created_at.desc(), newest_run.id.desc())
+        .limit(1)
+        .scalar_subquery()
+    )
+    accepted_run_id = (
+        select(newest_passed.run_id)
+        .where(newest_passed.robot_id == Robot.id, newest_passed.accepted.is_(True))
+        .order_by(newest_passed.measured_at.desc(), newest_passed.run_id.desc())
+        .limit(1)
+        .scalar_subquery()
+    )
+    return (
+        select(
+            Robot.id.label("robot_id"),
+            Robot.model,
+            Robot.meta.label("robot_metadata"),
+            Robot.created_at.label("robot_created_at"),
+            Robot.updated_at.label("robot_updated_at"),
+            *(column.label(f"run_{column.key}") for column in _RUN_COLUMNS),
+            Result.passed,
+            Result.metric_error_final,
+            accepted_run_id.label("accepted_run_id"),
+        )
+        .select_from(Robot)
+        .outerjoin(Run, Run.id == latest_run_id)
+        .outerjoin(Result, Result.run_id == Run.id)
+        .cte("latest")
+    )
+
+
+def _fleet_totals(latest: Any) -> Any:
+    """The CTE `totals`: `FleetTotals`' counts over `latest` (every robot, not one page)."""
+    status, passed = latest.c.run_status, latest.c.passed
+
+    def count_of(condition: Any) -> Any:
+        return func.coalesce(func.sum(case((condition, 1), else_=0)), 0)
+
+    return select(
+        func.count().label("robots"),
+        count_of((status == RunStatus.SUCCEEDED) & passed.is_(True)).label("latest_passed"),
+        count_of((status == RunStatus.FAILED) | passed.is_(False)).label("latest_failed"),
+        count_of(status.in_([RunStatus.QUEUED, RunStatus.RUNNING])).label("in_progress"),
+        count_of(latest.c.run_id.is_(None)).label("no_run"),
+        count_of(latest.c.accepted_run_id.is_not(None)).label("with_accepted"),
+    ).cte("totals")
 
 
 def _fleet_row(row: Any) -> FleetRow:

@@ -1,11 +1,12 @@
 """The API's request and response bodies (separate input and public schemas, as in the
-full-stack-fastapi-template), and the slice of `result.json` the service reads."""
+full-stack-fastapi-template). A run's result is `pipeline.result_model.ResultDocument`, the model
+`result.json` is written from: the API validates and returns that, with its derived angles."""
 
 from __future__ import annotations
 
 import uuid
 from datetime import datetime
-from typing import Annotated, Any
+from typing import Annotated
 
 from pydantic import (
     AnyUrl,
@@ -16,9 +17,11 @@ from pydantic import (
     StrictBool,
     StrictFloat,
     UrlConstraints,
+    computed_field,
     model_validator,
 )
 
+from pipeline.result_model import ResultDocument, rpy_deg
 from pipeline.transforms import from_translation_xyzw
 from service.models import DeliveryStatus, EventType, OverrideAction, RunKind, RunStatus, Scope
 from service.parameters import PlainText
@@ -116,7 +119,7 @@ class RunPublic(RunSummary):
     config: dict[str, JsonValue] | None = Field(
         description="The calibration config sent with the upload (X-Fleetcal-Config), if any."
     )
-    result: dict[str, JsonValue] | None = Field(description="The run's result.json document.")
+    result: ResultDocument | None = Field(description="The run's result.json document.")
     error: Problem | None = Field(description="Why the run failed (a problem document).")
     overrides: list[OverridePublic] = Field(
         default_factory=list, description="Accepts and rejects of the result, oldest first."
@@ -181,7 +184,7 @@ class CalibrationPublic(BaseModel):
     metric_error_final: float | None
     pipeline_version: str
     lidars: dict[str, LidarCalibration] = Field(description="`T_base_lidar` per LiDAR frame.")
-    result: dict[str, JsonValue]
+    result: ResultDocument
 
 
 class HistoryPoint(BaseModel):
@@ -194,6 +197,11 @@ class HistoryPoint(BaseModel):
     translation: Vector3
     rotation_xyzw: Quaternion
     stddev: dict[str, JsonValue] | None
+
+    @computed_field(description="fixed-axis roll, pitch, yaw in degrees (URDF's rpy)")  # type: ignore[prop-decorator]
+    @property
+    def rpy_deg(self) -> tuple[float, float, float]:
+        return rpy_deg(self.rotation_xyzw)
 
 
 class HistoryPage(BaseModel):
@@ -375,40 +383,3 @@ class Health(BaseModel):
 class Readiness(BaseModel):
     status: str
     checks: dict[str, str]
-
-
-# -- result.json (what the service reads of it) ---------------------------------------------------
-
-
-class ResultLidar(BaseModel):
-    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
-
-    calibrated: Pose | None = None
-    stddev: dict[str, Any] | None = None
-
-
-class ResultMetricError(BaseModel):
-    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
-
-    initial: float | None = None
-    final: float | None = None
-
-
-class ResultVerdict(BaseModel):
-    model_config = ConfigDict(extra="allow")
-
-    passed: bool
-
-
-class ResultDocument(BaseModel):
-    """The fields of DESIGN.md's `result.json` that become columns; the rest is kept as is."""
-
-    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
-
-    schema_version: int
-    reference_frame: str
-    lidars: dict[str, ResultLidar] = Field(min_length=1)
-    metric_error: ResultMetricError = Field(default_factory=ResultMetricError)
-    verdict: ResultVerdict
-    pipeline_version: str = Field(min_length=1, max_length=64)
-    config_hash: str | None = Field(default=None, max_length=80)

@@ -85,7 +85,7 @@ def optimisation_progress(iteration: int, max_iterations: int) -> float:
 
 
 # The tolerance profile's limits that are the pipeline verdict's own (`VerdictConfig`); the drift
-# and design limits are checked here, after the pipeline (`workers.drift`).
+# and design limits come with the reference poses (`workers.drift`), judged by the same verdict.
 _VERDICT_LIMITS = ("max_metric_error_m", "max_translation_stddev_m", "max_rotation_stddev_deg")
 
 
@@ -160,15 +160,15 @@ def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
 
     stage(STAGES[0])
     result = calibrate(problem, config, progress=after, on_iteration=iteration)
+    if spec.context.reference is not None:
+        stage("drift")
+        result = drift.judged_against(result, spec.context.reference)
     document = result_document(result, read_seconds=read_seconds)
     document["stages"] = {"download": {"seconds": download_seconds}, **document["stages"]}
     document["tolerance_profile"] = spec.context.profile
-    if spec.context.reference is not None:
-        stage("drift")
-        document = drift.compare(document, spec.context.reference)
     stage("report")
     started = time.perf_counter()
-    document["report"] = _report_images(spec, problem, result, document["verdict"]["passed"])
+    document["report"] = _report_images(spec, problem, result, result.verdict.passed)
     document["stages"]["report"] = {"seconds": time.perf_counter() - started}
     return document
 

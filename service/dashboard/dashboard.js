@@ -31,15 +31,6 @@
   const { mm, deg, checkCells, stddevSummary } = fleetcal.format;
   const { ofAccepted, rotationChangeDeg } = fleetcal.drift;
 
-  // -- geometry (quaternions [x, y, z, w]) ---------------------------------------------------------
-
-  function rpyDeg([x, y, z, w]) {
-    const roll = Math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y));
-    const pitch = Math.asin(Math.max(-1, Math.min(1, 2 * (w * y - z * x))));
-    const yaw = Math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z));
-    return [roll, pitch, yaw].map((a) => (a * 180) / Math.PI);
-  }
-
   // -- charts (inline SVG) ----------------------------------------------------------------------
 
   // series: [{label, colour, points: [{t: Date, v, passed, runId}]}]; band: {lo, hi, label} or null.
@@ -364,7 +355,7 @@
       h(
         "p",
         {},
-        `Latest accepted: t = [${latest.translation.map((v) => v.toFixed(4)).join(", ")}] m, roll/pitch/yaw = [${rpyDeg(latest.rotation_xyzw).map((v) => v.toFixed(3)).join(", ")}]° (T_base_lidar, ${ago(latest.measured_at)}). `,
+        `Latest accepted: t = [${latest.translation.map((v) => v.toFixed(4)).join(", ")}] m, roll/pitch/yaw = [${latest.rpy_deg.map((v) => v.toFixed(3)).join(", ")}]° (T_base_lidar, ${ago(latest.measured_at)}). `,
       ),
       h(
         "p",
@@ -544,7 +535,7 @@
 
   function lidarsCard(doc) {
     const frames = Object.keys(doc.lidars).sort((a, b) => (a === doc.reference_frame ? -1 : b === doc.reference_frame ? 1 : a.localeCompare(b)));
-    const pose = (p) => (p ? `[${p.translation.map((v) => v.toFixed(4)).join(", ")}] m, [${rpyDeg(p.rotation_xyzw).map((v) => v.toFixed(3)).join(", ")}]°` : "–");
+    const pose = (p) => (p ? `[${p.translation.map((v) => v.toFixed(4)).join(", ")}] m, [${p.rpy_deg.map((v) => v.toFixed(3)).join(", ")}]°` : "–");
     return h(
       "section",
       { class: "card", id: "lidars" },

@@ -8,6 +8,7 @@ from fastapi import APIRouter, Query, Response
 from pydantic import TypeAdapter
 from sqlalchemy.orm import Session
 
+from pipeline.result_model import ResultDocument
 from service import repository
 from service.auth import Principal
 from service.deps import AdminKey, CurrentKey, ReadKey, RobotIdPath, SessionDep, WriteSessionDep
@@ -120,7 +121,7 @@ def get_calibration(
         metric_error_final=result.metric_error_final,
         pipeline_version=result.pipeline_version,
         lidars=lidars,
-        result=result.document,
+        result=ResultDocument.model_validate(result.document),
     )
 
 

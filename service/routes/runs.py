@@ -11,6 +11,7 @@ from anyio import to_thread
 from fastapi import APIRouter, Header, Query, Request, Response
 from sqlalchemy.exc import IntegrityError
 
+from pipeline.result_model import ResultDocument
 from service import overrides, repository
 from service.deps import CurrentKey, ReadKey, RobotIdPath, Services, ServicesDep, SessionDep
 from service.models import Override, Result, Run, RunKind, RunStatus
@@ -252,7 +253,7 @@ def run_public(run: Run, result: Result | None, audit: Sequence[Override] = ()) 
         upload=UploadInfo(size=run.upload_size, sha256=run.upload_sha256, format=run.upload_format),
         idempotency_key=run.idempotency_key,
         config=run.config,
-        result=result.document if result else None,
+        result=ResultDocument.model_validate(result.document) if result else None,
         error=Problem.model_validate(run.error) if run.error else None,
         overrides=[OverridePublic.model_validate(row, from_attributes=True) for row in audit],
     )

@@ -4,6 +4,7 @@ import jsonschema
 import pytest
 
 from pipeline.result import dumps, result_document, result_schema
+from pipeline.result_model import ResultDocument
 from tests.pipeline.calibration_data import box_calibration, floor_only_calibration
 
 
@@ -41,3 +42,19 @@ def test_an_undetermined_lidar_has_no_calibrated_pose_and_no_confident_stddev() 
     assert document["metric_error"]["final"] is None  # no object points: nothing to compare
     determined = [c for c in document["verdict"]["checks"] if c["name"] == "determined:lidar_rear"]
     assert determined[0]["passed"] is False and determined[0]["dofs"] == ["x", "y", "yaw"]
+
+
+def test_the_keys_are_in_contract_order() -> None:
+    document = result_document(floor_only_calibration(), read_seconds=0.5)
+    assert list(document) == [key for key in ResultDocument.model_fields if key in document]
+    assert list(document["lidars"]["lidar_rear"])[:5] == [
+        "topic",
+        "reference",
+        "initial",
+        "calibrated",
+        "stddev",
+    ]
+    assert next(iter(document["stages"])) == "read"
+    passed = [c for c in document["verdict"]["checks"] if c["passed"]]
+    assert all(set(c) == {"name", "value", "limit", "passed"} for c in passed), "no empty detail"
+    assert "drift" not in document and "tolerance_profile" not in document

@@ -1,4 +1,15 @@
-from pipeline.verdict import LidarEvidence, VerdictConfig, judge
+import math
+
+import pytest
+
+from pipeline.verdict import (
+    DriftEvidence,
+    LidarEvidence,
+    Verdict,
+    VerdictConfig,
+    judge,
+    with_drift,
+)
 
 
 def _lidar(frame: str, **changes: object) -> LidarEvidence:
@@ -52,3 +63,58 @@ def test_each_failure_is_a_named_check_with_value_and_limit() -> None:
 def test_a_nan_value_never_passes() -> None:
     verdict = judge(float("nan"), True, 3, 200, [_lidar("a", is_reference=True)], VerdictConfig())
     assert [c.name for c in verdict.failed] == ["metric_error"]
+
+
+def _good() -> Verdict:
+    lidars = [_lidar("a", is_reference=True), _lidar("b"), _lidar("c")]
+    return judge(0.004, True, 30, 200, lidars, VerdictConfig())
+
+
+def test_drift_is_judged_with_the_pipeline_checks_in_frame_order() -> None:
+    drift = DriftEvidence(
+        "last_accepted",
+        {"c": (0.004, 0.2), "b": (0.03, 0.1)},
+        max_translation_m=0.01,
+        max_rotation_deg=0.5,
+    )
+    verdict = with_drift(_good(), drift)
+    assert verdict.checks[: len(_good().checks)] == _good().checks
+    added = verdict.checks[len(_good().checks) :]
+    assert [c.name for c in added] == [
+        "drift_translation:b",
+        "drift_rotation:b",
+        "drift_translation:c",
+        "drift_rotation:c",
+    ]
+    assert not verdict.passed
+    assert [c.name for c in verdict.failed] == ["drift_translation:b"]
+    assert verdict.failed[0].detail == (
+        "b is 0.03 m away from its last accepted calibration (limit 0.01 m): "
+        "has its mount moved or been hit?"
+    )
+    assert verdict.evidence is not None and verdict.evidence.drift == drift
+
+
+def test_drift_within_limits_keeps_the_verdict_passed() -> None:
+    drift = DriftEvidence("design", {"b": (0.004, 0.2)}, max_rotation_deg=0.5)
+    verdict = with_drift(_good(), drift)
+    assert verdict.passed
+    assert [c.name for c in verdict.checks[len(_good().checks) :]] == ["design_rotation:b"]
+
+
+def test_without_limits_drift_is_evidence_but_no_check() -> None:
+    drift = DriftEvidence("design", {"b": (0.5, 30.0)}, missing=("d",))
+    assert with_drift(_good(), drift).checks == _good().checks
+
+
+def test_a_lidar_the_reference_knows_but_the_run_did_not_calibrate_fails() -> None:
+    drift = DriftEvidence("design", {"b": (0.0, 0.0)}, missing=("a2",), max_translation_m=0.02)
+    failed = with_drift(_good(), drift).failed
+    assert [c.name for c in failed] == ["design_missing:a2"]
+    assert math.isnan(failed[0].value) and math.isnan(failed[0].limit)
+    assert failed[0].detail == "a2 is in the design extrinsics but was not calibrated"
+
+
+def test_a_verdict_made_without_judge_cannot_take_drift() -> None:
+    with pytest.raises(ValueError, match="judge it anew"):
+        with_drift(Verdict(True, ()), DriftEvidence("design", {}))

@@ -1,4 +1,5 @@
-"""A realistic `result.json` (DESIGN.md's output contract) for the data layer and API tests."""
+"""A realistic `result.json` (`pipeline.result_model.ResultDocument`) for the data layer and API
+tests; `test_repository` holds it to the model."""
 
 from __future__ import annotations
 
@@ -44,9 +45,12 @@ def result_document(
                     "translation": [0.0, 0.3, 0.6],
                     "rotation_xyzw": [0, 0, 0.7071, 0.7071],
                 },
-                "calibrated": None,
-                "stddev": None,
-                "undetermined": "floor only: no object constrains x, y and yaw",
+                "calibrated": None,  # floor only: no object constrains x, y and yaw
+                "stddev": {
+                    "translation_m": [None, None, 0.0021],
+                    "rotation_deg": [0.03, 0.04, None],
+                },
+                "undetermined": ["x", "y", "yaw"],
             },
         },
         "metric_error": {"initial": 0.021, "final": final},

@@ -9,10 +9,12 @@ import uuid
 from collections.abc import Iterator
 from datetime import UTC, datetime
 
+import jsonschema
 import pytest
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 
+from pipeline.result_model import result_schema
 from service import repository
 from service.db import Database
 from service.models import LidarExtrinsic, Result, Robot, Run, RunKind, RunStatus
@@ -139,6 +141,10 @@ def test_store_result_writes_result_extrinsics_and_status_together(db: Database)
     assert all(row.passed and row.measured_at == run.created_at for row in rows)
 
 
+def test_the_test_document_follows_the_result_schema() -> None:
+    jsonschema.Draft202012Validator(result_schema()).validate(result_document())
+
+
 def test_store_result_twice_keeps_the_first(db: Database) -> None:
     run_id = queued_run(db)
     with db.transaction() as session:
@@ -173,8 +179,24 @@ def test_store_result_refuses_a_worker_that_lost_its_lease(db: Database) -> None
             "translation",
         ),
         (lambda d: d.update(lidars={}), "lidars"),
+        (lambda d: d["lidars"].pop("lidar_rear") and d["lidars"].pop("lidar_left"), "lidars"),
+        (
+            lambda d: d["lidars"]["lidar_rear"]["calibrated"].update(rotation_xyzw=[0, 0, 0, 0]),
+            "no direction",
+        ),
+        (lambda d: d["lidars"]["lidar_left"].update(undetermined="x and y"), "undetermined"),
+        (lambda d: d["verdict"]["checks"][0].update(passed="maybe"), "passed"),
     ],
-    ids=["no-verdict", "nan-error", "short-translation", "no-lidars"],
+    ids=[
+        "no-verdict",
+        "nan-error",
+        "short-translation",
+        "no-lidars",
+        "one-lidar",
+        "no-rotation",
+        "undetermined-in-words",
+        "check-without-outcome",
+    ],
 )
 def test_store_result_refuses_documents_off_contract(db: Database, mutate, match: str) -> None:  # type: ignore[no-untyped-def]
     run_id = queued_run(db)

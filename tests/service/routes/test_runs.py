@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from pipeline.result_model import ResultDocument
 from service import repository
 from service.models import Run, RunStatus
 from service.settings import Settings
@@ -271,7 +272,12 @@ def test_get_run_shows_the_result_once_stored(api: Api) -> None:
         repository.store_result(session, uuid.UUID(run_id), document)
     run = api.client.get(f"/v1/runs/{run_id}", headers=api.headers("read")).json()
     assert run["status"] == "succeeded" and run["passed"] is True
-    assert run["metric_error_final"] == 0.0012 and run["result"] == document
+    assert run["metric_error_final"] == 0.0012
+    # The result model of the stored document: its data, defaults filled in, angles derived.
+    assert run["result"] == ResultDocument.model_validate(document).model_dump(mode="json")
+    assert run["result"]["lidars"]["lidar_left"]["initial"]["rpy_deg"] == pytest.approx(
+        [0.0, 0.0, 90.0]
+    )
     assert run["finished_at"] is not None and run["progress"] == 1.0
 
 
