@@ -21,6 +21,7 @@ from pipeline.denoise import DenoiseConfig
 from pipeline.errors import ConfigError
 from pipeline.io.config import ReaderConfig
 from pipeline.metric import MetricConfig
+from pipeline.moving_points import MovingPointsConfig
 from pipeline.observability import ObservabilityConfig
 from pipeline.optimisation import OptimisationConfig
 from pipeline.rough_refinement import RoughRefinementConfig
@@ -52,6 +53,7 @@ class PipelineConfig(BaseModel):
 
     reader: ReaderConfig = ReaderConfig()
     frames: FramesConfig = FramesConfig()
+    moving_points: MovingPointsConfig = MovingPointsConfig()
     denoise: DenoiseConfig = DenoiseConfig(density_ratio=2.5)
     """The pipeline judges only the points standing above each cloud's floor (`prepare`) of the
     LiDARs with non-repetitive scans (`stage_1_filters`), with a density ratio stricter than the

@@ -61,6 +61,8 @@ class Stop:
     `t_start`, `t_end`: seconds (ROS time). `T_odom_base`: the *initial* pose of the base during
     the stop, from odometry, (4, 4). `clouds[frame]`: (N, 3) float64 points in that LiDAR's frame,
     from every scan wholly inside the stop. `scan_counts[frame]`: how many scans went in.
+    `scan_sizes[frame]`: the points of each of those scans, in the order they are concatenated
+    (empty where unknown: moving points are then not looked for).
     """
 
     index: int
@@ -69,6 +71,7 @@ class Stop:
     T_odom_base: Matrix4
     clouds: Mapping[str, NDArray[np.float64]]
     scan_counts: Mapping[str, int] = field(default_factory=dict)
+    scan_sizes: Mapping[str, tuple[int, ...]] = field(default_factory=dict)
 
     @property
     def duration(self) -> float:

@@ -98,6 +98,7 @@ def read_recording(path: Path | str, config: ReaderConfig | None = None) -> Cali
                 {f: c.points for f, c in stop.clouds.items() if c.points is not None}
             ),
             scan_counts=MappingProxyType({f: c.scans for f, c in stop.clouds.items()}),
+            scan_sizes=MappingProxyType({f: c.scan_sizes for f, c in stop.clouds.items()}),
         )
         for stop in summary.stops
     )

@@ -42,6 +42,8 @@ class StopCloud:
     scans: int
     scans_touching: int
     """Scans stamped inside the stop, kept or not (to explain an empty cloud)."""
+    scan_sizes: tuple[int, ...] = ()
+    """Points of each kept scan, in the order they are concatenated in `points`."""
 
 
 class StopClouds:
@@ -107,12 +109,14 @@ class StopClouds:
                 for c in candidates
                 if c.stamp_ns - reach >= stop.t_start_ns and c.stamp_ns + reach <= stop.t_end_ns
             ]
-            points = None
+            points: NDArray[np.float64] | None = None
+            sizes: tuple[int, ...] = ()
             if self.keep_points:
                 arrays = [c.points for c in inside if c.points is not None]
                 # Scans wait in their stored type (float32, half the memory) and become
                 # float64 in this one copy.
                 points = np.concatenate(arrays, dtype=np.float64) if arrays else np.empty((0, 3))
+                sizes = tuple(len(a) for a in arrays)
             self.closed[index][frame] = StopCloud(
-                points, sum(c.valid for c in inside), len(inside), len(candidates)
+                points, sum(c.valid for c in inside), len(inside), len(candidates), sizes
             )

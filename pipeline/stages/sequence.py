@@ -12,12 +12,14 @@ from pipeline.stages import (
     floor_refine,
     joint_optimise,
     measure,
+    moving,
     observe,
     segment,
 )
 from pipeline.stages.runner import Stage, stage_names
 
 STAGE_SEQUENCE: tuple[Stage, ...] = (
+    Stage("moving_points", moving.run),
     Stage("denoise", denoise_stage.run),
     Stage("segmentation", segment.run),
     Stage("rough_refinement", floor_refine.run),

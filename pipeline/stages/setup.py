@@ -54,6 +54,10 @@ def initial_state(problem: CalibrationProblem, frames: FramesConfig) -> Calibrat
             )
             for lidar in lidars
         ),
+        scan_sizes=tuple(
+            tuple(tuple(stop.scan_sizes.get(lidar.frame, ())) for stop in problem.stops)
+            for lidar in lidars
+        ),
         up_in_lidar=tuple(
             lidar.T_base_lidar[:3, :3].T @ np.array([0.0, 0.0, 1.0]) for lidar in lidars
         ),

@@ -84,7 +84,9 @@ class CalibrationState:
     """The calibration between two stages. Set up before the first (`setup.initial_state`); each
     stage returns a copy with what it made filled in (None: not made yet, see `required`).
 
-    `clouds_in_lidar` are the stop clouds as recorded (not copied), `up_in_lidar` the expected
+    `clouds_in_lidar` are the stop clouds as recorded (not copied; the moving-points stage leaves
+    them without what moved), `scan_sizes` the points of each scan in them (empty where the source
+    did not say), `up_in_lidar` the expected
     floor normal in each LiDAR's frame from the initial extrinsics. `T_G_ref` (J, 4, 4) and
     `T_ref_lidar` (L, 4, 4) are the current estimate (stages 3 and 4 refine them), `*_initial`
     where they started. Stage 1 leaves `floors_in_lidar` (fitted before it: it judges what stands
@@ -99,6 +101,7 @@ class CalibrationState:
     T_ref_lidar_initial: NDArray[np.float64]
     T_G_ref: NDArray[np.float64]
     T_ref_lidar: NDArray[np.float64]
+    scan_sizes: PerCloud[tuple[int, ...]] = ()
     floors_in_lidar: PerCloud[FloorFit | None] | None = None
     kept: PerCloud[KeepMask | None] | None = None
     filtered_frames: tuple[str, ...] = ()

@@ -376,7 +376,7 @@ def simulate_problem(
     chunks: dict[str, list[LabelledScan]] = {m.frame: [] for m in spec.lidars}
     stops = []
     for j, (a, b) in enumerate(world.stop_times):
-        clouds, counts = {}, {}
+        clouds, counts, sizes = {}, {}, {}
         for i, mount in enumerate(spec.lidars):
             scans = [world.simulate_scan(i, k) for k in world.stop_scans(i, j)]
             chunks[mount.frame] += scans
@@ -384,6 +384,7 @@ def simulate_problem(
                 np.concatenate([s.points for s in scans]) if scans else np.zeros((0, 3))
             )
             counts[mount.frame] = len(scans)
+            sizes[mount.frame] = tuple(len(s.points) for s in scans)
         stops.append(
             Stop(
                 index=j,
@@ -392,6 +393,7 @@ def simulate_problem(
                 T_odom_base=odometry[j],
                 clouds=clouds,
                 scan_counts=counts,
+                scan_sizes=sizes,
             )
         )
     lidars = sorted(

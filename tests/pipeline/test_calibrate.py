@@ -100,20 +100,20 @@ def test_calibrate_runs_the_declared_sequence_and_a_stage_inserted_in_it(
         seen.append(state)
         return StageOutcome(state, {"looked": True}, "looked at the state")
 
-    sequence = (*STAGE_SEQUENCE[:3], Stage("look", look), *STAGE_SEQUENCE[3:])
+    sequence = (*STAGE_SEQUENCE[:4], Stage("look", look), *STAGE_SEQUENCE[4:])
     monkeypatch.setattr(pipeline.calibrate, "STAGE_SEQUENCE", sequence)
     heard: list[tuple[str, float, str]] = []
     result = calibrate(
         box_problem()[0],
         progress=lambda stage, seconds, message: heard.append((stage, seconds, message)),
     )
-    names = (*STAGES[:3], "look", *STAGES[3:])
+    names = (*STAGES[:4], "look", *STAGES[4:])
     assert tuple(result.stages) == names
     assert [stage for stage, _, _ in heard] == list(names)
     assert [seconds for _, seconds, _ in heard] == [
         report.seconds for report in result.stages.values()
     ]
-    assert heard[3][2] == "looked at the state"
+    assert heard[4][2] == "looked at the state"
     assert result.stages["look"].details == {"looked": True}
     # It ran after stage 3 and before stage 4, and changed nothing.
     assert len(seen) == 1 and seen[0].floor_refinement is not None and seen[0].optimised is None

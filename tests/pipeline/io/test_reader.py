@@ -87,6 +87,8 @@ def test_every_format_reads_back_the_scene(
         for frame, cloud in stop.clouds.items():
             assert stop.scan_counts[frame] == expected_scans
             assert cloud.shape == (expected_scans * truth.valid_per_scan[frame], 3)
+            # Each scan's valid points, in the order they are concatenated (moving points).
+            assert stop.scan_sizes[frame] == (truth.valid_per_scan[frame],) * expected_scans
             assert cloud.dtype == np.float64
             # Floor points placed with the TRUE pose and extrinsic lie on z = 0 (float32 rounding).
             z = apply(T_true @ truth.T_base_lidar[frame], cloud)[:, 2]

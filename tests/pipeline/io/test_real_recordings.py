@@ -163,6 +163,7 @@ def test_organised_clouds_with_zeros_for_no_return_decode_right(tmp_path: Path) 
     for stop, flat_stop in zip(problem.stops, twin.stops, strict=True):
         for frame, cloud in stop.clouds.items():
             assert len(cloud) == stop.scan_counts[frame] * 200
+            assert stop.scan_sizes[frame] == (200,) * stop.scan_counts[frame]
             assert not (cloud == 0).all(axis=1).any()
             np.testing.assert_array_equal(cloud, flat_stop.clouds[frame])
 

@@ -1,0 +1,61 @@
+"""Before stage 1: the points that moved within their stop (people, carts walking by) leave each
+stop cloud (`pipeline.moving_points`), so that no later stage fits a floor, an object or a pair to
+them. What was removed is reported per LiDAR."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from pipeline.config import PipelineConfig
+from pipeline.moving_points import find_moving_points, scan_ids
+from pipeline.stages.runner import Listeners, StageOutcome
+from pipeline.stages.state import CalibrationState, Detail
+from pipeline.transforms import Points
+
+
+def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
+    """Remove the moving points of every stop cloud whose scans are known and numerous enough."""
+    settings = config.moving_points
+    clouds: list[tuple[Points, ...]] = []
+    sizes: list[tuple[tuple[int, ...], ...]] = []
+    details: dict[str, Detail] = {"enabled": settings.enabled}
+    judged = skipped = 0
+    unknown = tuple(((),) * len(row) for row in state.clouds_in_lidar)
+    for lidar, row, row_sizes in zip(
+        state.lidars, state.clouds_in_lidar, state.scan_sizes or unknown, strict=True
+    ):
+        kept_row, sizes_row, removed = [], [], 0
+        for cloud, scan_sizes in zip(row, row_sizes, strict=True):
+            found = (
+                find_moving_points(cloud, scan_sizes, settings)
+                if settings.enabled and scan_sizes
+                else None
+            )
+            if found is None or found.skipped:
+                skipped += found is not None or (settings.enabled and len(cloud) > 0)
+                kept_row.append(cloud)
+                sizes_row.append(scan_sizes)
+                continue
+            judged += 1
+            keep = ~found.moving
+            kept_row.append(cloud[keep] if found.moving.any() else cloud)
+            sizes_row.append(
+                tuple(
+                    int(n)
+                    for n in np.bincount(scan_ids(scan_sizes)[keep], minlength=len(scan_sizes))
+                )
+            )
+            removed += int(found.moving.sum())
+        clouds.append(tuple(kept_row))
+        sizes.append(tuple(sizes_row))
+        details[f"removed_points.{lidar.frame}"] = removed
+    total = sum(int(v) for k, v in details.items() if k.startswith("removed_points."))
+    details.update(removed_points=total, judged_clouds=judged, skipped_clouds=skipped)
+    new_state = dataclasses.replace(state, clouds_in_lidar=tuple(clouds), scan_sizes=tuple(sizes))
+    return StageOutcome(
+        new_state,
+        details,
+        f"{total} moving points removed from {judged} stop clouds ({skipped} not judged)",
+    )

@@ -1,0 +1,55 @@
+"""The moving-points stage on a synthesised stop sequence with two people walking by: what it
+removes is, almost all of it, what the synthesiser labels as on a walker, and it says how much
+per LiDAR; a world without walkers loses nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.config import PipelineConfig
+from pipeline.stages import moving
+from pipeline.stages.runner import Listeners
+from pipeline.stages.setup import initial_state
+from pipeline.synth.simulate import simulate_problem
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.mark.parametrize(("scenario", "walkers"), [("people", True), ("set1-box", False)])
+def test_removed_points_are_the_walkers(scenario: str, walkers: bool) -> None:
+    problem, truth = simulate_problem(scenario, seed=0, rate_scale=0.1)
+    config = PipelineConfig()
+    state = initial_state(problem, config.frames)
+    outcome = moving.run(state, config, Listeners())
+    details = outcome.details
+    removed = truth_moving = hits = 0
+    for lidar, before, after, sizes in zip(
+        state.lidars,
+        state.clouds_in_lidar,
+        outcome.state.clouds_in_lidar,
+        outcome.state.scan_sizes,
+        strict=True,
+    ):
+        for stop, (cloud, kept, kept_sizes) in enumerate(zip(before, after, sizes, strict=True)):
+            labels = truth.stop_labels(stop, lidar.frame).is_moving
+            assert len(labels) == len(cloud)
+            assert sum(kept_sizes) == len(kept)
+            # What is kept is a subset of the cloud in order: match it back by position.
+            kept_rows = {row.tobytes() for row in kept}
+            gone = np.array([row.tobytes() not in kept_rows for row in cloud], dtype=bool)
+            removed += gone.sum()
+            truth_moving += labels.sum()
+            hits += (gone & labels).sum()
+        assert details[f"removed_points.{lidar.frame}"] >= 0
+    assert details["removed_points"] == removed
+    if walkers:
+        assert truth_moving > 0
+        assert hits / removed > 0.9  # precision
+        # Recall at this sparse rate (a tenth of a Mid-70's points): 0.15; 0.83 at 0.3 of the rate.
+        # A rosette this sparse rarely returns twice from one direction in a stop, so few points
+        # are seen through; slow walkers also look static to the second test.
+        assert hits / truth_moving > 0.1
+    else:
+        assert removed == 0
+    assert details["judged_clouds"] > 0
