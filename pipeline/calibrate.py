@@ -157,6 +157,8 @@ class Prepared:
     filtered_frames: tuple[str, ...]
     denoise_seconds: float
     floor_seconds: float
+    removed_by_frame: dict[str, tuple[int, int]] = field(default_factory=dict)
+    """Per filtered LiDAR frame: (points judged, points removed) by stage 1 over all stops."""
 
     def filtered(self, lidar: int, stop: int) -> tuple[Points, FloorFit | None]:
         """LiDAR `lidar`'s cloud at stop `stop` without what stage 1 removed, and its floor
@@ -214,6 +216,7 @@ def prepare(
     clouds, floors, kept_masks = [], [], []
     counts = {"input": 0, "removed": 0, "judged": 0}
     seconds = {"floor": 0.0, "denoise": 0.0}
+    by_frame: dict[str, tuple[int, int]] = {}
     filtered_frames = tuple(
         lidar.frame for lidar in lidars if denoised and stage_1_filters(lidar, config.denoise)
     )
@@ -232,6 +235,8 @@ def prepare(
                 seconds["denoise"] += kept.seconds
                 counts["judged"] += kept.judged_points
                 counts["removed"] += kept.removed_points
+                judged, removed = by_frame.get(lidar.frame, (0, 0))
+                by_frame[lidar.frame] = (judged + kept.judged_points, removed + kept.removed_points)
                 keep = kept.keep if kept.removed_points else None
             row.append(cloud)
             row_floors.append(floor)
@@ -253,6 +258,7 @@ def prepare(
         filtered_frames,
         seconds["denoise"],
         seconds["floor"],
+        by_frame,
     )
 
 
@@ -370,6 +376,11 @@ def calibrate(
             "enabled": config.denoise.enabled,
             "filtered_frames": ",".join(prepared.filtered_frames),
             "method": str(config.denoise.method),
+            **{
+                f"{count}.{frame}": value
+                for frame, pair in prepared.removed_by_frame.items()
+                for count, value in zip(("judged_points", "removed_points"), pair, strict=True)
+            },
         },
     )
     report("denoise", _denoise_message(prepared, config.denoise))

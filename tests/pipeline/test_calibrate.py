@@ -167,6 +167,10 @@ def test_stage_1_judges_only_what_stands_above_the_floor() -> None:
     # The objects and what trails behind them: a small share of every cloud, of which a few
     # per cent are bleeding points.
     assert 0 < removed < judged < 0.3 * int(denoise["input_points"])
+    # Per LiDAR too: what each filtered frame had judged and removed adds up to the totals.
+    frames = str(denoise["filtered_frames"]).split(",")
+    assert sum(int(denoise[f"judged_points.{f}"]) for f in frames) == judged
+    assert sum(int(denoise[f"removed_points.{f}"]) for f in frames) == removed
 
 
 def test_stage_1_takes_each_lidars_optical_axis_from_the_config() -> None:
