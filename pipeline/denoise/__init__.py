@@ -9,7 +9,7 @@ from __future__ import annotations
 import enum
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,6 +33,7 @@ from pipeline.denoise.filters import (
     sor_keep,
     sor_mask,
 )
+from pipeline.denoise.range_gap import RangeGapSettings, range_gap_keep
 from pipeline.errors import BadInputError
 from pipeline.problem import ScanPattern
 
@@ -65,6 +66,9 @@ class DenoiseMethod(enum.StrEnum):
     """Statistical outlier removal: one threshold `H_g` for every point."""
     DSOR = "dsor"
     """Dynamic SOR: threshold `H_g * C_r * r_n`, r_n the range from the sensor."""
+    RANGE_GAP = "range_gap"
+    """Ranges between those of the neighbouring beams (see `range_gap`); its range noise and
+    scan pattern come from the LiDAR (`range_noise_m`, the recording) or from the cloud."""
 
 
 class DenoiseConfig(BaseModel):
@@ -91,6 +95,14 @@ class DenoiseConfig(BaseModel):
     )
     cell_deg: float = Field(
         default=10.0, gt=0.0, le=90.0, description="pattern: direction cell for the scan's spacing"
+    )
+    range_gap_k: int = Field(
+        default=16, ge=4, description="range_gap: nearest directions a point is compared with"
+    )
+    range_noise_m: dict[str, float] = Field(
+        default_factory=dict,
+        description="range_gap: per LiDAR frame, its model's range-noise sigma (metres); frames "
+        "not named have it estimated from each cloud",
     )
     floor_distance_m: float = Field(
         default=0.05, gt=0.0, description="RANSAC inlier distance of the floor fit (metres)"
@@ -131,6 +143,8 @@ class DenoiseResult:
     that use one, else None. `note`: why the cloud was left untouched when it was (disabled, too
     few points to judge); None when the filter ran. `seconds`: wall time of the call.
     `judged_points`: how many points were judged (all, unless the call named some).
+    `parameters`: what `range_gap` used (range noise, scan pattern, whether each was estimated
+    from the cloud); empty for the other methods.
     """
 
     keep: KeepMask
@@ -139,6 +153,7 @@ class DenoiseResult:
     observation_centre: Points | None = None
     note: str | None = None
     judged_points: int = 0
+    parameters: dict[str, float | str | bool] = field(default_factory=dict)
 
     @property
     def removed_points(self) -> int:
@@ -151,6 +166,9 @@ def denoise(
     optical_axis: Sequence[float] | ArrayLike | None = None,
     floor_plane: ArrayLike | None = None,
     judge: ArrayLike | None = None,
+    *,
+    range_noise_m: float | None = None,
+    scan_pattern: ScanPattern | None = None,
 ) -> DenoiseResult:
     """Stage 1 on one LiDAR's accumulated cloud of one stop:
 
@@ -168,6 +186,8 @@ def denoise(
     neighbours are still searched among all points, and the cloud-wide statistics come from
     `population_points` random points of the whole cloud. The pipeline judges only what stands
     above the floor, where the objects are: a tenth of a full-rate cloud, a tenth of the time.
+    `range_noise_m`, `scan_pattern`: the LiDAR's, for `range_gap` (estimated from the cloud when
+    None; `parameters` of the result says what was used).
 
     Defined results rather than errors: a cloud of at most `k` points is kept whole (there are
     not `k` neighbours to judge density by) and `note` says so; duplicated points and a cloud
@@ -179,10 +199,44 @@ def denoise(
     cloud = as_cloud(points)
     if not cfg.enabled:
         return _untouched(cloud, cfg, start, "stage 1 disabled in the config")
-    if len(cloud) <= cfg.k:
+    k = cfg.range_gap_k if cfg.method is DenoiseMethod.RANGE_GAP else cfg.k
+    if len(cloud) <= k:
         return _untouched(
-            cloud, cfg, start, f"{len(cloud)} points are too few to judge with k={cfg.k}; kept all"
+            cloud, cfg, start, f"{len(cloud)} points are too few to judge with k={k}; kept all"
         )
+    rows, sample = (None, None) if judge is None else _judged_rows(cloud, cfg, judge)
+    parameters: dict[str, float | str | bool] = {}
+    centre: Points | None = None
+    if cfg.method is DenoiseMethod.RANGE_GAP:
+        judged, report = range_gap_keep(
+            cloud,
+            RangeGapSettings(k=cfg.range_gap_k),
+            range_noise_m=range_noise_m,
+            pattern=scan_pattern,
+            rows=rows,
+            population=sample,
+        )
+        parameters = report.as_details()
+    else:
+        judged, centre = _density_keep(cloud, cfg, optical_axis, floor_plane, judge)
+    keep = judged
+    if rows is not None:
+        keep = np.ones(len(cloud), dtype=np.bool_)
+        keep[rows] = judged
+    judged_points = len(cloud) if rows is None else len(rows)
+    seconds = time.perf_counter() - start
+    return DenoiseResult(keep, cfg.method, seconds, centre, None, judged_points, parameters)
+
+
+def _density_keep(
+    cloud: Points,
+    cfg: DenoiseConfig,
+    optical_axis: Sequence[float] | ArrayLike | None,
+    floor_plane: ArrayLike | None,
+    judge: ArrayLike | None,
+) -> tuple[KeepMask, Points | None]:
+    """The methods built on the mean distance `mu_n` to the `k` nearest points: the keep mask of
+    the judged points, and the observation centre where the method uses one."""
     # Every point judged: one kNN query over the cloud. Some judged: a query for them and for a
     # random sample of the cloud, which gives the cloud-wide statistics (`population`).
     rows: NDArray[np.intp] | None = None
@@ -199,9 +253,8 @@ def denoise(
         points = cloud[rows]
     mu = neighbours.mean_distance
     sample = None if population is None else population[0]
-    centre: Points | None = None
     if cfg.method is DenoiseMethod.PATTERN:
-        judged = pattern_keep(
+        keep = pattern_keep(
             neighbours,
             cloud,
             density_ratio=cfg.density_ratio,
@@ -211,28 +264,22 @@ def denoise(
             rows=rows,
             population=population,
         )
-    elif cfg.method is DenoiseMethod.SOR:
-        judged = sor_keep(mu, cfg.cs, sample)
-    elif cfg.method is DenoiseMethod.DSOR:
-        judged = dsor_keep(mu, points, cfg.cs, cfg.cr, sample)
-    else:
-        centre = observation_centre(
-            cloud,
-            cfg.optical_axis if optical_axis is None else optical_axis,
-            floor_plane,
-            floor_distance_m=cfg.floor_distance_m,
-            floor_iterations=cfg.floor_iterations,
-            seed=cfg.seed,
-        )
-        floored = cfg.method is DenoiseMethod.FLOORED
-        judged = proposed_keep(
-            mu, points, centre, cfg.cs, cfg.cr, floored=floored, population=sample
-        )
-    keep = judged
-    if rows is not None:
-        keep = np.ones(len(cloud), dtype=np.bool_)
-        keep[rows] = judged
-    return DenoiseResult(keep, cfg.method, time.perf_counter() - start, centre, None, len(points))
+        return keep, None
+    if cfg.method is DenoiseMethod.SOR:
+        return sor_keep(mu, cfg.cs, sample), None
+    if cfg.method is DenoiseMethod.DSOR:
+        return dsor_keep(mu, points, cfg.cs, cfg.cr, sample), None
+    centre = observation_centre(
+        cloud,
+        cfg.optical_axis if optical_axis is None else optical_axis,
+        floor_plane,
+        floor_distance_m=cfg.floor_distance_m,
+        floor_iterations=cfg.floor_iterations,
+        seed=cfg.seed,
+    )
+    floored = cfg.method is DenoiseMethod.FLOORED
+    keep = proposed_keep(mu, points, centre, cfg.cs, cfg.cr, floored=floored, population=sample)
+    return keep, centre
 
 
 def _judged_rows(

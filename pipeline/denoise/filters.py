@@ -167,7 +167,7 @@ def pattern_keep(
     measured_beams, measured = beams, angular
     if population is not None:
         _, measured_beams, measured = _angular_spacing(population[0], cloud[population[1]])
-    typical = _cell_medians(measured, measured_beams, math.radians(cell_deg), min_count=k)
+    typical = cell_medians(measured, measured_beams, math.radians(cell_deg), min_count=k)
     expected = ranges * typical(beams)
     candidates = np.flatnonzero(mu > density_ratio * expected)
     keep = np.ones(len(points), dtype=np.bool_)
@@ -195,7 +195,7 @@ def _angular_spacing(
     return ranges, points / safe[:, None], np.where(ranges > 0.0, mu / safe, 0.0)
 
 
-def _cell_medians(
+def cell_medians(
     values: NDArray[np.float64], directions: Points, cell_rad: float, *, min_count: int
 ) -> Callable[[Points], NDArray[np.float64]]:
     """The median of `values` over the points in each direction cell, as a lookup: directions

@@ -67,6 +67,8 @@ class _Filtered:
     kept: PerCloud[KeepMask | None]
     judged_points: int
     removed_points: int
+    by_frame: dict[str, tuple[int, int]] = dataclasses.field(default_factory=dict)
+    """Per filtered LiDAR frame: (points judged, points removed) over all stops."""
 
 
 def _filter(
@@ -78,6 +80,7 @@ def _filter(
     """Stage 1 on the clouds of the LiDARs `frames` that have a floor; the rest all kept."""
     kept: list[tuple[KeepMask | None, ...]] = []
     judged = removed = 0
+    by_frame: dict[str, tuple[int, int]] = {}
     for lidar, clouds, row_floors in zip(state.lidars, state.clouds_in_lidar, floors, strict=True):
         row: list[KeepMask | None] = []
         for cloud, floor in zip(clouds, row_floors, strict=True):
@@ -87,9 +90,14 @@ def _filter(
             result = denoise_above_floor(cloud, floor[0], config, lidar.frame)
             judged += result.judged_points
             removed += result.removed_points
+            frame_judged, frame_removed = by_frame.get(lidar.frame, (0, 0))
+            by_frame[lidar.frame] = (
+                frame_judged + result.judged_points,
+                frame_removed + result.removed_points,
+            )
             row.append(result.keep if result.removed_points else None)
         kept.append(tuple(row))
-    return _Filtered(tuple(kept), judged, removed)
+    return _Filtered(tuple(kept), judged, removed, by_frame)
 
 
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
@@ -114,6 +122,9 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         "filtered_frames": ",".join(frames),
         "method": str(config.denoise.method),
     }
+    for frame, (frame_judged, frame_removed) in filtered.by_frame.items():
+        details[f"judged_points.{frame}"] = frame_judged
+        details[f"removed_points.{frame}"] = frame_removed
     message = _message(new_state, filtered, config.denoise)
     return StageOutcome(new_state, details, message, credited_seconds=-floor_seconds)
 

@@ -21,12 +21,14 @@ from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError
 from pipeline.problem import CalibrationProblem, LidarInfo, RecordingInfo, Stop
+from pipeline.synth.bleeding import BleedingModel
+from pipeline.synth.bleeding_cast import cast_with_beam
 from pipeline.synth.dust import DustSpec, draw_dust
 from pipeline.synth.floor import draw_floor
-from pipeline.synth.lidar_models import LidarModel
+from pipeline.synth.lidar_models import Firing, LidarModel
 from pipeline.synth.motion import interpolate_drift
 from pipeline.synth.perturbation import drift_errors, random_perturbation
-from pipeline.synth.raycast import cast_with_footprint
+from pipeline.synth.raycast import Returns, cast_with_footprint
 from pipeline.synth.room import Room, build_room
 from pipeline.synth.scenarios import ScenarioSpec, get_scenario
 from pipeline.synth.scene import NOT_STATIC, Scene, build_scene, place_objects
@@ -77,47 +79,22 @@ def scan(
     slice_s: float = 0.01,
     stamp_ns: int = 0,
     dust: DustSpec | None = None,
+    bleeding: BleedingModel | None = None,
 ) -> LabelledScan:
     """Cast `lidar`'s rays fired in `[t0, t0 + duration)` (seconds since the recording started).
 
     `T_world_lidar` is a fixed pose, or a function of time for a moving sensor: then the scan is
     cast in slices of `slice_s`, each from the pose at its middle. Rays that hit nothing within
     the model's range give no point. Range noise is Gaussian with the model's sigma; bleeding
-    points come from `raycast.cast_with_footprint`, labelled when they float more than three
-    sigmas away from both surfaces they mix. With `dust`, a few rays return from dust near the
-    sensor instead (drawn from `rng` after everything else, so the other rays keep their noise).
+    points come from `raycast.cast_with_footprint` (the model's `footprint_deg`), or with
+    `bleeding` from that beam model (`bleeding_cast.cast_with_beam`), labelled when they float
+    more than three sigmas away from both surfaces they mix. With `dust`, a few rays return from
+    dust near the sensor instead (drawn from `rng` after everything else, so the other rays keep
+    their noise).
     """
     firing = lidar.firing(t0, duration, rate_scale)
-    starts: NDArray[np.int64] = np.zeros(1, dtype=np.int64)
-    ends: NDArray[np.int64] = np.full(1, len(firing), dtype=np.int64)
-    if not callable(T_world_lidar):
-        poses = np.asarray(T_world_lidar, dtype=np.float64)[None]
-    elif len(firing):
-        slice_index = np.floor((firing.times - t0) / slice_s).astype(np.int64)
-        bounds = np.flatnonzero(np.diff(slice_index)) + 1
-        starts = np.concatenate([starts, bounds])
-        ends = np.concatenate([bounds, ends])
-        middles = t0 + (slice_index[starts] + 0.5) * slice_s
-        poses = T_world_lidar(middles.astype(np.float64))
-    else:
-        poses = T_world_lidar(np.array([t0]))
-
-    # Each ray is cast from its slice's pose: origins and directions in the world, per ray.
-    if len(poses) == 1:
-        origins, directions = poses[0, :3, 3], firing.directions @ poses[0, :3, :3].T
-    else:
-        slice_of_ray = np.repeat(np.arange(len(poses)), ends - starts)
-        origins = poses[slice_of_ray, :3, 3]
-        directions = np.einsum("nij,nj->ni", poses[slice_of_ray, :3, :3], firing.directions)
-    returns = cast_with_footprint(
-        scene,
-        origins,
-        directions,
-        max_range=lidar.max_range_m,
-        footprint_deg=lidar.footprint_deg,
-        label_margin_m=3.0 * lidar.range_noise_m,
-        rng=rng,
-    )
+    rays = _world_rays(firing, T_world_lidar, t0, slice_s)
+    returns = _returns(scene, lidar, rays, rng, bleeding)
     range_m, geom = returns.range_m, returns.geom
     keep = np.isfinite(range_m) & (range_m >= lidar.min_range_m)
     measured = np.full(len(range_m), np.inf)
@@ -150,12 +127,82 @@ def scan(
     )
 
 
+@dataclass(frozen=True)
+class _WorldRays:
+    """Rays of one scan in the world frame: per ray `origins`, `directions` and the sensor's
+    z axis `up` ((N, 3) each, or (3,) for a scan cast from one pose)."""
+
+    origins: NDArray[np.float64]
+    directions: NDArray[np.float64]
+    up: NDArray[np.float64]
+
+
+def _world_rays(
+    firing: Firing, T_world_lidar: Matrix4 | PoseFn, t0: float, slice_s: float
+) -> _WorldRays:
+    """Each ray cast from its slice's pose (one pose for a fixed `T_world_lidar`)."""
+    starts: NDArray[np.int64] = np.zeros(1, dtype=np.int64)
+    ends: NDArray[np.int64] = np.full(1, len(firing), dtype=np.int64)
+    if not callable(T_world_lidar):
+        poses = np.asarray(T_world_lidar, dtype=np.float64)[None]
+    elif len(firing):
+        slice_index = np.floor((firing.times - t0) / slice_s).astype(np.int64)
+        bounds = np.flatnonzero(np.diff(slice_index)) + 1
+        starts = np.concatenate([starts, bounds])
+        ends = np.concatenate([bounds, ends])
+        middles = t0 + (slice_index[starts] + 0.5) * slice_s
+        poses = T_world_lidar(middles.astype(np.float64))
+    else:
+        poses = T_world_lidar(np.array([t0]))
+    if len(poses) == 1:
+        return _WorldRays(poses[0, :3, 3], firing.directions @ poses[0, :3, :3].T, poses[0, :3, 2])
+    slice_of_ray = np.repeat(np.arange(len(poses)), ends - starts)
+    rotations = poses[slice_of_ray, :3, :3]
+    return _WorldRays(
+        poses[slice_of_ray, :3, 3],
+        np.einsum("nij,nj->ni", rotations, firing.directions),
+        rotations[:, :, 2],
+    )
+
+
+def _returns(
+    scene: Scene,
+    lidar: LidarModel,
+    rays: _WorldRays,
+    rng: np.random.Generator,
+    bleeding: BleedingModel | None,
+) -> Returns:
+    """What the receiver reports per ray: the model's own footprint, or `bleeding`'s beam."""
+    margin = 3.0 * lidar.range_noise_m
+    if bleeding is None:
+        return cast_with_footprint(
+            scene,
+            rays.origins,
+            rays.directions,
+            max_range=lidar.max_range_m,
+            footprint_deg=lidar.footprint_deg,
+            label_margin_m=margin,
+            rng=rng,
+        )
+    return cast_with_beam(
+        scene,
+        rays.origins,
+        rays.directions,
+        rays.up,
+        model=bleeding,
+        max_range=lidar.max_range_m,
+        label_margin_m=margin,
+        rng=rng,
+    )
+
+
 @dataclass(frozen=True, eq=False)
 class World:
     """A scenario made concrete by a seed: the scene, true and perturbed poses, odometry errors.
 
     Times: `t` in seconds since the first stop began (the recording's start); ROS time is
-    `spec.start_time_ns + t`.
+    `spec.start_time_ns + t`. `bleeding`: the beam model every LiDAR's mixed returns come from;
+    None: each LiDAR model's own footprint (how every scenario renders by default).
     """
 
     spec: ScenarioSpec
@@ -165,6 +212,7 @@ class World:
     T_base_lidar_true: tuple[Matrix4, ...]
     T_base_lidar_initial: tuple[Matrix4, ...]
     odometry_errors: NDArray[np.float64]
+    bleeding: BleedingModel | None = None
 
     @property
     def duration_s(self) -> float:
@@ -234,7 +282,14 @@ class World:
             rate_scale=self.rate_scale,
             stamp_ns=self.spec.start_time_ns + scan_index * period,
             dust=self.spec.scene.dust,
+            bleeding=self.bleeding,
         )
+
+    def simulate_stop(self, lidar_index: int, stop_index: int) -> list[LabelledScan]:
+        """The scans of LiDAR `lidar_index` that a stop's cloud accumulates (`stop_scans`)."""
+        return [
+            self.simulate_scan(lidar_index, k) for k in self.stop_scans(lidar_index, stop_index)
+        ]
 
     @cached_property
     def stop_times(self) -> NDArray[np.float64]:
@@ -283,8 +338,15 @@ class World:
         )
 
 
-def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0) -> World:
-    """Fix everything `seed` decides for `scenario` (a registered name or a spec)."""
+def make_world(
+    scenario: str | ScenarioSpec,
+    seed: int,
+    rate_scale: float = 1.0,
+    *,
+    bleeding: BleedingModel | None = None,
+) -> World:
+    """Fix everything `seed` decides for `scenario` (a registered name or a spec); `bleeding`
+    replaces the LiDAR models' own footprints (`World.bleeding`)."""
     spec = get_scenario(scenario) if isinstance(scenario, str) else scenario
     if not (math.isfinite(rate_scale) and rate_scale > 0):
         raise ConfigError(
@@ -312,6 +374,7 @@ def make_world(scenario: str | ScenarioSpec, seed: int, rate_scale: float = 1.0)
         T_base_lidar_true=true,
         T_base_lidar_initial=initial,
         odometry_errors=errors,
+        bleeding=bleeding,
     )
 
 
@@ -360,16 +423,20 @@ def _free_of(
 
 
 def simulate_problem(
-    scenario: str | ScenarioSpec, seed: int = 0, rate_scale: float = 1.0
+    scenario: str | ScenarioSpec,
+    seed: int = 0,
+    rate_scale: float = 1.0,
+    *,
+    bleeding: BleedingModel | None = None,
 ) -> tuple[CalibrationProblem, Truth]:
     """The `CalibrationProblem` a reader would build from the scenario's recording, and its truth.
 
     Only the scans wholly inside each stop are simulated (those are all a stop cloud holds), so
     this is much faster than writing the bag. Stop poses are the odometry's (perturbed), LiDAR
     extrinsics the perturbed `/tf_static` ones. `truth.stop_labels(j, frame)` lines up with
-    `problem.stops[j].clouds[frame]`.
+    `problem.stops[j].clouds[frame]`. `bleeding`: as for `make_world`.
     """
-    world = make_world(scenario, seed, rate_scale)
+    world = make_world(scenario, seed, rate_scale, bleeding=bleeding)
     spec = world.spec
     start_s = spec.start_time_ns / _NS
     odometry = world.odometry(world.stop_times[:, 0])
@@ -378,7 +445,7 @@ def simulate_problem(
     for j, (a, b) in enumerate(world.stop_times):
         clouds, counts, sizes = {}, {}, {}
         for i, mount in enumerate(spec.lidars):
-            scans = [world.simulate_scan(i, k) for k in world.stop_scans(i, j)]
+            scans = world.simulate_stop(i, j)
             chunks[mount.frame] += scans
             clouds[mount.frame] = (
                 np.concatenate([s.points for s in scans]) if scans else np.zeros((0, 3))
@@ -396,22 +463,8 @@ def simulate_problem(
                 scan_sizes=sizes,
             )
         )
-    lidars = sorted(
-        (
-            LidarInfo(
-                frame=mount.frame,
-                topic=mount.topic,
-                T_base_lidar=world.T_base_lidar_initial[i],
-                scan_count=world.scan_count(i),
-                points_per_second=mount.model.rate(world.rate_scale),
-                scan_pattern=mount.model.scan_pattern,
-            )
-            for i, mount in enumerate(spec.lidars)
-        ),
-        key=lambda lidar: lidar.frame,
-    )
     problem = CalibrationProblem(
-        lidars=tuple(lidars),
+        lidars=_lidar_infos(world),
         stops=tuple(stops),
         base_frame=spec.base_frame,
         odom_frame=spec.odom_frame,
@@ -424,6 +477,22 @@ def simulate_problem(
     )
     labels = {frame: labels_of(chunks[frame]) for frame in chunks}
     return problem, world.truth(labels)
+
+
+def _lidar_infos(world: World) -> tuple[LidarInfo, ...]:
+    """What the reader reports of each LiDAR (perturbed extrinsics), sorted by frame."""
+    infos = (
+        LidarInfo(
+            frame=mount.frame,
+            topic=mount.topic,
+            T_base_lidar=world.T_base_lidar_initial[i],
+            scan_count=world.scan_count(i),
+            points_per_second=mount.model.rate(world.rate_scale),
+            scan_pattern=mount.model.scan_pattern,
+        )
+        for i, mount in enumerate(world.spec.lidars)
+    )
+    return tuple(sorted(infos, key=lambda lidar: lidar.frame))
 
 
 def labels_of(scans: list[LabelledScan]) -> ScanLabels:

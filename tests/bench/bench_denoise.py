@@ -2,6 +2,13 @@
 
     .venv/bin/python -m tests.bench.bench_denoise [--scenes set1-box,set1-cylinder,set1-capsule]
         [--seeds 10,11] [--stop-step 2] [--repeats 5]
+    .venv/bin/python -m tests.bench.bench_denoise --bleeding-draws 24 [--draw-stops 0,8]
+
+`--bleeding-draws N`: instead, the randomised bleeding models of `pipeline.synth.bleeding`
+(draws 0..N-1: beam, scan pattern, scene), every LiDAR at the stops `--draw-stops`, each filter
+judging every point: precision / recall / F per draw (pooled over its clouds), their mean and
+minimum, and CPU seconds per 100k points. `range_gap` runs twice: estimating the range noise and
+scan pattern from each cloud, and given the LiDAR model's.
 
 Clouds are the stop clouds `simulate_problem` gives the pipeline (every LiDAR, every
 `--stop-step`-th stop, full point rate). Positive = a removed point that is truly bleeding;
@@ -48,7 +55,13 @@ from pipeline.denoise import (  # noqa: E402
 )
 from pipeline.segmentation import fit_floor  # noqa: E402
 from pipeline.stages.denoise_stage import denoise_above_floor  # noqa: E402
-from tests.pipeline.denoise.clouds import LabelledCloud, synth_stop_clouds  # noqa: E402
+from pipeline.synth.bleeding import draw_bleeding_case  # noqa: E402
+from tests.pipeline.denoise.clouds import (  # noqa: E402
+    BeamCloud,
+    LabelledCloud,
+    bleeding_stop_clouds,
+    synth_stop_clouds,
+)
 
 DEFAULT_SCENES = ("set1-box", "set1-cylinder", "set1-capsule")
 CENTRE_DISC_M = 0.2
@@ -151,6 +164,88 @@ def timing_table(scenes: list[str], seeds: list[int], repeats: int) -> str:
     return "\n".join(lines)
 
 
+def draw_filters(beam: BeamCloud) -> dict[str, Callable[[], DenoiseResult]]:
+    """The filters the bleeding-model table compares, each judging every point of the cloud."""
+    cloud = beam.cloud
+    paper = {m: DenoiseConfig(method=m) for m in (DenoiseMethod.SOR, DenoiseMethod.DSOR)}
+    actions: dict[str, Callable[[], DenoiseResult]] = {
+        "range_gap (estimated)": partial(
+            denoise, cloud.points, DenoiseConfig(method=DenoiseMethod.RANGE_GAP)
+        ),
+        "range_gap (LiDAR model)": partial(
+            denoise,
+            cloud.points,
+            DenoiseConfig(method=DenoiseMethod.RANGE_GAP),
+            range_noise_m=beam.range_noise_m,
+            scan_pattern=beam.scan_pattern,
+        ),
+        "pattern (old default)": partial(denoise, cloud.points, DenoiseConfig()),
+    }
+    actions.update(
+        {
+            str(m): partial(denoise, cloud.points, cfg, cloud.optical_axis)
+            for m, cfg in paper.items()
+        }
+    )
+    return actions
+
+
+def bleeding_table(draws: int, stops: list[int]) -> str:
+    """Markdown: per draw, P / R / F of each filter; then mean and minimum F, seconds per 100k."""
+    rows: list[str] = []
+    scores: dict[str, list[float]] = defaultdict(list)
+    cpu: dict[str, float] = defaultdict(float)
+    points = 0
+    labels: list[str] = []
+    for seed in range(draws):
+        case = draw_bleeding_case(seed)
+        tallies: dict[str, Tally] = defaultdict(Tally)
+        bleeding = size = 0
+        for beam in bleeding_stop_clouds(case, stops):
+            size += len(beam.cloud.points)
+            bleeding += int(beam.cloud.is_bleeding.sum())
+            nowhere = np.zeros(len(beam.cloud.points), dtype=np.bool_)
+            for label, action in draw_filters(beam).items():
+                started = time.process_time()
+                keep = action().keep
+                cpu[label] += time.process_time() - started
+                tallies[label].add(keep, beam.cloud, nowhere)
+        points += size
+        labels = list(tallies)
+        cells = []
+        for label in labels:
+            precision, recall, f_score = tallies[label].scores()
+            scores[label].append(f_score)
+            cells.append(f"{precision:.2f} / {recall:.2f} / **{f_score:.2f}**")
+        rows.append(
+            f"| {seed} | {case.pattern} | {case.describe()} | {size} | {bleeding} | "
+            + " | ".join(cells)
+            + " |"
+        )
+        print(rows[-1], file=sys.stderr, flush=True)
+    head = [
+        f"## Randomised bleeding models ({draws} draws, stops {stops}, every LiDAR, every point "
+        "judged)\n",
+        "| draw | pattern | model | points | bleeding | "
+        + " | ".join(f"{m} P / R / F" for m in labels)
+        + " |",
+        "|---|---|---|---:|---:|" + "---|" * len(labels),
+    ]
+    summary = [
+        "\n| filter | mean F | min F | mean F rosette | mean F spinning | CPU s per 100k |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    patterns = [draw_bleeding_case(seed).pattern for seed in range(draws)]
+    for label in labels:
+        f = np.array(scores[label])
+        by = {p: f[[q == p for q in patterns]].mean() for p in ("rosette", "spinning")}
+        summary.append(
+            f"| {label} | {f.mean():.3f} | {f.min():.3f} | {by['rosette']:.3f} | "
+            f"{by['spinning']:.3f} | {cpu[label] / points * 1e5:.3f} |"
+        )
+    return "\n".join(head + rows + summary)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -160,7 +255,13 @@ def main() -> None:
     parser.add_argument("--stop-step", type=int, default=2, help="use every n-th stop")
     parser.add_argument("--repeats", type=int, default=5, help="timing runs per method")
     parser.add_argument("--timing-only", action="store_true", help="only the timing table")
+    parser.add_argument("--bleeding-draws", type=int, default=0, help="randomised beam models")
+    parser.add_argument("--draw-stops", default="0,8", help="stops of each draw's scene")
     args = parser.parse_args()
+    if args.bleeding_draws:
+        stops = [int(s) for s in args.draw_stops.split(",") if s]
+        print(bleeding_table(args.bleeding_draws, stops))
+        return
     scenes = [s for s in args.scenes.split(",") if s]
     seeds = [int(s) for s in args.seeds.split(",") if s]
     if args.timing_only:

@@ -8,6 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.problem import ScanPattern
+from pipeline.synth.bleeding import BleedingCase
+
 PITCH = np.radians(35.0)
 HEIGHT = 0.5
 AXIS = (1.0, 0.0, 0.0)
@@ -93,3 +96,31 @@ def f_score(keep: NDArray[np.bool_], is_bleeding: NDArray[np.bool_]) -> float:
     false_pos = int(np.count_nonzero(removed & ~is_bleeding))
     false_neg = int(np.count_nonzero(keep & is_bleeding))
     return 2 * true_pos / max(2 * true_pos + false_pos + false_neg, 1)
+
+
+@dataclass(frozen=True)
+class BeamCloud:
+    """A `LabelledCloud` rendered with a drawn bleeding model, with what its LiDAR model knows:
+    `range_noise_m` and `scan_pattern` (what a config may give the filter)."""
+
+    cloud: LabelledCloud
+    range_noise_m: float
+    scan_pattern: ScanPattern
+
+
+def bleeding_stop_clouds(case: BleedingCase, stops: Sequence[int] = (0, 8)) -> Iterator[BeamCloud]:
+    """The stop clouds `stops` of every LiDAR of `case`'s scene, rendered with its beam."""
+    from pipeline.synth import make_world
+
+    world = make_world(case.scenario, case.scene_seed, bleeding=case.bleeding)
+    for i, mount in enumerate(world.spec.lidars):
+        up = world.T_base_lidar_initial[i][:3, :3].T @ np.array([0.0, 0.0, 1.0])
+        for j in stops:
+            scans = world.simulate_stop(i, j)
+            cloud = LabelledCloud(
+                np.concatenate([s.points for s in scans]),
+                np.concatenate([s.is_bleeding for s in scans]),
+                np.asarray(mount.model.optical_axis, dtype=np.float64),
+                up,
+            )
+            yield BeamCloud(cloud, mount.model.range_noise_m, mount.model.scan_pattern)

@@ -104,6 +104,10 @@ def test_stage_1_judges_only_what_stands_above_the_floor() -> None:
     # per cent are bleeding points.
     assert 0 < removed < judged < 0.3 * int(denoise["input_points"])
     assert outcome.message == f"removed {removed} of the {judged} points above the floor"
+    # Per LiDAR too: what each filtered frame had judged and removed adds up to the totals.
+    frames = str(denoise["filtered_frames"]).split(",")
+    assert sum(int(denoise[f"judged_points.{f}"]) for f in frames) == judged
+    assert sum(int(denoise[f"removed_points.{f}"]) for f in frames) == removed
     # The floors' time is segmentation's: taken off this stage's wall time.
     floor_seconds = outcome.state.floor_seconds
     assert floor_seconds > 0 and outcome.credited_seconds == -floor_seconds

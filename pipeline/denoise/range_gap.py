@@ -1,0 +1,196 @@
+"""The range-gap filter: a mixed return's range is not one its neighbouring beams see.
+
+A bleeding point is a range reported *between* two surfaces that one beam straddled. Seen from
+the sensor, its neighbouring beams (the nearest directions, whatever the scan pattern) return
+from the near surface or the far one, rarely from where it is. So a point is noise when, among
+its `k` nearest directions,
+
+1. few return within `tau` of its own range (`support <= support_share * k`),
+2. some return nearer than its range minus `tau` and some farther than its range plus `tau`
+   (`min(nearer, farther) >= side_share * k`: it lies between two surfaces), and
+3. the neighbours' range spread (median |range difference| over range) exceeds `spread_ratio`
+   times the typical spread of its direction cell (a surface seen at grazing incidence, whose
+   neighbours also lie nearer and farther, is typical of its cell; a sheet of mixed returns in
+   front of a wall is not).
+
+The parameters come from the LiDAR and the cloud, not from one simulator's tuning: `tau` is three
+range-noise sigmas, from the LiDAR model when the config gives it, else estimated from the cloud
+(the spread of range differences between beams that point the same way); the scan pattern (given,
+or estimated: a spinning LiDAR fires the same directions every scan, so a stop cloud holds exact
+repeats of each direction) picks `spread_ratio`, because a repetitive scan's neighbours are the
+same beam's other scans, whose typical spread is the range noise alone. The beam divergence needs
+no parameter: the test looks at ranges, not at how far from an edge a point lies, so any width of
+the smeared band is handled (measured on the randomised beams of `pipeline.synth.bleeding`).
+
+One kNN query on unit directions (float32), then vectorised counts: about the cost of SOR's query.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.denoise.filters import KeepMask, Points, cell_medians
+from pipeline.problem import ScanPattern
+
+# Directions closer than this (radians) are the same beam fired again (float32 unit vectors
+# resolve ~1e-7; a rosette's neighbours are 1e-3 apart).
+_REPEAT_RAD = 1e-5
+# A cloud whose points mostly have a repeat of their direction among their neighbours: repetitive.
+_REPEAT_SHARE = 0.5
+# |difference| of two draws of N(0, s^2): median 0.6745 * sqrt(2) * s.
+_MEDIAN_ABS_DIFF = 0.6745 * math.sqrt(2.0)
+_CELL_DEG = 10.0
+
+
+@dataclass(frozen=True)
+class RangeGapSettings:
+    """The filter's parameters that do not depend on the LiDAR (see the module docstring)."""
+
+    k: int = 16
+    noise_sigmas: float = 3.0
+    support_share: float = 0.25
+    side_share: float = 0.125
+    spread_ratio_rosette: float = 8.0
+    spread_ratio_repetitive: float = 3.0
+
+
+@dataclass(frozen=True)
+class RangeGapReport:
+    """What the filter used on one cloud: the range noise (m), the scan pattern, and which of the
+    two came from the cloud itself rather than the config."""
+
+    range_noise_m: float
+    pattern: ScanPattern
+    noise_estimated: bool
+    pattern_estimated: bool
+
+    def as_details(self) -> dict[str, float | str | bool]:
+        return {
+            "range_noise_m": round(self.range_noise_m, 5),
+            "scan_pattern": str(self.pattern),
+            "range_noise_estimated": self.noise_estimated,
+            "scan_pattern_estimated": self.pattern_estimated,
+        }
+
+
+@dataclass(frozen=True)
+class _Beams:
+    """Per judged point: range (N,), unit direction (N, 3), and its `k` nearest directions'
+    range differences (N, k) and angles (N, k) (itself excluded)."""
+
+    ranges: NDArray[np.float64]
+    units: Points
+    range_diff: NDArray[np.float64]
+    angle: NDArray[np.float64]
+
+
+def range_gap_keep(
+    cloud: Points,
+    settings: RangeGapSettings = RangeGapSettings(),
+    *,
+    range_noise_m: float | None = None,
+    pattern: ScanPattern | None = None,
+    rows: NDArray[np.intp] | None = None,
+    population: NDArray[np.intp] | None = None,
+) -> tuple[KeepMask, RangeGapReport]:
+    """Keep mask of the points `rows` of `cloud` (N, 3, sensor at the origin; all when None),
+    and what it used. `range_noise_m` / `pattern`: the LiDAR's, when known; estimated from the
+    cloud when None (or `pattern` UNKNOWN). `population`: the rows (e.g. a random sample of the
+    whole cloud) that the estimates and the typical spread per direction come from when only
+    some points are judged; default: the judged points. The cloud needs more than
+    `settings.k` points."""
+    beams = _beams(cloud, settings.k, rows)
+    measured = beams if population is None else _beams(cloud, settings.k, population)
+    noise_estimated = range_noise_m is None
+    sigma = estimate_range_noise(measured) if range_noise_m is None else range_noise_m
+    pattern_estimated = pattern is None or pattern is ScanPattern.UNKNOWN
+    if pattern is None or pattern is ScanPattern.UNKNOWN:
+        pattern = estimate_scan_pattern(measured)
+    report = RangeGapReport(sigma, pattern, noise_estimated, pattern_estimated)
+    if sigma <= 0.0:
+        return np.ones(len(beams.ranges), dtype=np.bool_), report
+    tau = settings.noise_sigmas * sigma
+    k = settings.k
+    diff = beams.range_diff
+    support = np.count_nonzero(np.abs(diff) <= tau, axis=1)
+    sides = np.minimum(np.count_nonzero(diff < -tau, axis=1), np.count_nonzero(diff > tau, axis=1))
+    spread = _spread(beams)
+    typical = cell_medians(
+        spread if population is None else _spread(measured),
+        measured.units,
+        math.radians(_CELL_DEG),
+        min_count=k,
+    )
+    ratio = (
+        settings.spread_ratio_repetitive
+        if pattern is ScanPattern.REPETITIVE
+        else settings.spread_ratio_rosette
+    )
+    noise = (
+        (support <= settings.support_share * k)
+        & (sides >= settings.side_share * k)
+        & (spread > ratio * typical(beams.units))
+    )
+    return ~noise, report
+
+
+def _spread(beams: _Beams) -> NDArray[np.float64]:
+    """(N,) median |range difference| to the neighbouring directions over the range: how far
+    the neighbours' ranges spread, in the angular units the scan's spacing has."""
+    k = beams.range_diff.shape[1]
+    safe = np.where(beams.ranges > 0.0, beams.ranges, 1.0)
+    # The median of k values by one partition (a full median costs a sort per row).
+    spread = np.partition(np.abs(beams.range_diff), k // 2, axis=1)[:, k // 2] / safe
+    return np.asarray(spread, dtype=np.float64)
+
+
+def estimate_range_noise(beams: _Beams) -> float:
+    """Range-noise sigma (m) from the cloud: the median |range difference| between each point and
+    the nearest of its neighbouring directions in range, over the points whose nearest direction
+    is closest (a tenth of the cloud: facing surfaces, densely sampled, where slope adds least),
+    rescaled as for two Gaussian draws. Overestimates a little where surfaces slope."""
+    nearest = np.argmin(beams.angle, axis=1)
+    rows = np.arange(len(nearest))
+    gap = np.abs(beams.range_diff[rows, nearest])
+    angle = beams.angle[rows, nearest]
+    closest = angle <= np.quantile(angle, 0.1)
+    return float(np.median(gap[closest]) / _MEDIAN_ABS_DIFF)
+
+
+def estimate_scan_pattern(beams: _Beams) -> ScanPattern:
+    """REPETITIVE when most points have an exact repeat of their direction among their
+    neighbours (a spinning LiDAR's stop cloud: one point per beam and scan), else
+    NON_REPETITIVE."""
+    repeated = np.any(beams.angle < _REPEAT_RAD, axis=1)
+    share = float(np.mean(repeated)) if len(repeated) else 0.0
+    return ScanPattern.REPETITIVE if share >= _REPEAT_SHARE else ScanPattern.NON_REPETITIVE
+
+
+def _beams(cloud: Points, k: int, rows: NDArray[np.intp] | None) -> _Beams:
+    from pykdtree.kdtree import KDTree
+
+    ranges_all = np.linalg.norm(cloud, axis=1)
+    units_all = cloud / np.where(ranges_all > 0.0, ranges_all, 1.0)[:, None]
+    directions = np.ascontiguousarray(units_all, dtype=np.float32)
+    query = directions if rows is None else directions[rows]
+    own = np.arange(len(cloud)) if rows is None else rows
+    chord, index = KDTree(directions, leafsize=32).query(query, k=k + 1)
+    # Repeated directions tie at distance 0, so the point itself need not come first: drop it
+    # wherever it is (else the farthest neighbour).
+    is_self = index == own[:, None]
+    drop = np.where(is_self.any(axis=1), np.argmax(is_self, axis=1), k)
+    keep = np.ones(index.shape, dtype=np.bool_)
+    keep[np.arange(len(own)), drop] = False
+    index = index[keep].reshape(len(own), k)
+    chord = chord[keep].reshape(len(own), k).astype(np.float64)
+    ranges = ranges_all[own]
+    return _Beams(
+        ranges=ranges,
+        units=units_all[own],
+        range_diff=ranges_all[index] - ranges[:, None],
+        angle=2.0 * np.arcsin(np.clip(chord / 2.0, 0.0, 1.0)),
+    )
