@@ -77,7 +77,8 @@ def test_service_killed_mid_upload_and_restarted_ends_with_one_run(
     api = Api(
         api_only.url,
         api_only.upload_key,
-        retries=10,
+        # Enough retries to outlast a restart on a loaded machine (about 90 s at most).
+        retries=30,
         backoff_s=0.3,
         max_backoff_s=3,
         on_retry=progress.line,
