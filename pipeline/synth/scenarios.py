@@ -182,75 +182,87 @@ def _set2(kinds: tuple[ObjectKind, ...], name: str) -> ScenarioSpec:
     )
 
 
+_KINDS = (ObjectKind.BOX, ObjectKind.CYLINDER, ObjectKind.CAPSULE)
+
+
 @cache
 def _registry() -> dict[str, ScenarioSpec]:
-    kinds = (ObjectKind.BOX, ObjectKind.CYLINDER, ObjectKind.CAPSULE)
     specs = [
-        _set1(
-            (kind,),
-            f"set1-{kind.value}",
-            f"Paper set 1: two Mid-70 tilted ~35 deg down, front and "
-            f"rear, {kind.value} objects, 16 stops rotating in place",
-        )
-        for kind in kinds
+        *(
+            _set1(
+                (kind,),
+                f"set1-{kind.value}",
+                f"Paper set 1: two Mid-70 tilted ~35 deg down, front and "
+                f"rear, {kind.value} objects, 16 stops rotating in place",
+            )
+            for kind in _KINDS
+        ),
+        *(_set2((kind,), f"set2-{kind.value}") for kind in _KINDS),
+        _floor_only(),
+        _spinning(),
+        _driven(),
+        *world_scenarios(_set1(_KINDS, "set1-mixed", "")),
+        _tiny(),
     ]
-    specs += [_set2((kind,), f"set2-{kind.value}") for kind in kinds]
+    return {spec.name: spec for spec in specs}
+
+
+def _floor_only() -> ScenarioSpec:
     floor_only = _set1(
-        kinds,
+        _KINDS,
         "floor-only",
         "Set 1 LiDARs on a bare floor: the floor fixes only roll, "
         "pitch and height, so x, y and yaw are undeterminable",
     )
-    specs.append(floor_only.model_copy(update={"scene": SceneSpec(rings=())}))
+    return floor_only.model_copy(update={"scene": SceneSpec(rings=())})
+
+
+def _spinning() -> ScenarioSpec:
     spinning = SpinningLidar(azimuth_mask_deg=(-70.0, 70.0))
-    specs.append(
-        ScenarioSpec(
-            name="spinning",
-            description="Two 16-beam spinning LiDARs tilted 20 deg down, front and rear, azimuth "
-            "masks of +-70 deg so their fields of view do not overlap; mixed objects",
-            lidars=_front_and_rear(spinning, pitch_deg=(20, 20), height_m=(0.9, 0.9)),
-            scene=SceneSpec(object_kinds=kinds),
-        )
+    return ScenarioSpec(
+        name="spinning",
+        description="Two 16-beam spinning LiDARs tilted 20 deg down, front and rear, azimuth "
+        "masks of +-70 deg so their fields of view do not overlap; mixed objects",
+        lidars=_front_and_rear(spinning, pitch_deg=(20, 20), height_m=(0.9, 0.9)),
+        scene=SceneSpec(object_kinds=_KINDS),
     )
-    driven = _set1(kinds, "driven", "")
-    specs.append(
-        driven.model_copy(
-            update={
-                "description": "Set 1 LiDARs driving a loop of radius 2.5 m with 12 stops, mixed "
-                "objects inside and outside the loop; the rear LiDAR hangs from a mount frame",
-                "lidars": _front_and_rear(
-                    Mid70(), rear_via=MountFrame(frame="mount_rear", xyz=(-0.25, 0.0, 0.6))
-                ),
-                "motion": ArcMotion(stops=12, radius_m=2.5, step_deg=30.0, dwell_s=1.5, move_s=2.5),
-                "scene": SceneSpec(
-                    object_kinds=kinds,
-                    rings=(
-                        Ring(r_min_m=0.3, r_max_m=1.7, count=(6, 8)),
-                        Ring(r_min_m=3.3, r_max_m=3.9, count=(16, 20)),
-                    ),
-                ),
-            }
-        )
-    )
-    specs += world_scenarios(_set1(kinds, "set1-mixed", ""))
-    tiny_mid70 = Mid70(max_range_m=12.0)
-    specs.append(
-        ScenarioSpec(
-            name="tiny",
-            description="For unit tests: two Mid-70 at 5 % of their rate, 4 stops, boxes; the rear "
-            "LiDAR hangs from a mount frame",
-            lidars=_front_and_rear(
-                tiny_mid70,
-                rear_via=MountFrame(frame="mount_rear", xyz=(-0.25, 0.0, 0.6), rpy_deg=(0, 0, 180)),
+
+
+def _driven() -> ScenarioSpec:
+    return _set1(_KINDS, "driven", "").model_copy(
+        update={
+            "description": "Set 1 LiDARs driving a loop of radius 2.5 m with 12 stops, mixed "
+            "objects inside and outside the loop; the rear LiDAR hangs from a mount frame",
+            "lidars": _front_and_rear(
+                Mid70(), rear_via=MountFrame(frame="mount_rear", xyz=(-0.25, 0.0, 0.6))
             ),
-            scene=SceneSpec(
-                rings=(Ring(r_min_m=1.0, r_max_m=2.4, count=(6, 8)),), floor_half_size_m=6.0
+            "motion": ArcMotion(stops=12, radius_m=2.5, step_deg=30.0, dwell_s=1.5, move_s=2.5),
+            "scene": SceneSpec(
+                object_kinds=_KINDS,
+                rings=(
+                    Ring(r_min_m=0.3, r_max_m=1.7, count=(6, 8)),
+                    Ring(r_min_m=3.3, r_max_m=3.9, count=(16, 20)),
+                ),
             ),
-            motion=ArcMotion(stops=4, step_deg=90.0, dwell_s=1.3, move_s=0.5),
-            rate_scale=0.05,
-        )
+        }
     )
-    return {spec.name: spec for spec in specs}
+
+
+def _tiny() -> ScenarioSpec:
+    return ScenarioSpec(
+        name="tiny",
+        description="For unit tests: two Mid-70 at 5 % of their rate, 4 stops, boxes; the rear "
+        "LiDAR hangs from a mount frame",
+        lidars=_front_and_rear(
+            Mid70(max_range_m=12.0),
+            rear_via=MountFrame(frame="mount_rear", xyz=(-0.25, 0.0, 0.6), rpy_deg=(0, 0, 180)),
+        ),
+        scene=SceneSpec(
+            rings=(Ring(r_min_m=1.0, r_max_m=2.4, count=(6, 8)),), floor_half_size_m=6.0
+        ),
+        motion=ArcMotion(stops=4, step_deg=90.0, dwell_s=1.3, move_s=0.5),
+        rate_scale=0.05,
+    )
 
 
 def scenario_names() -> tuple[str, ...]:

@@ -314,7 +314,45 @@ def build_scene(
     """The MuJoCo model of the floor, `objects`, `walkers` (mocap bodies, placed by
     `Scene.place_walkers`) and the robot (with a site per LiDAR mount). With an analytic
     `floor` the plane stays in the model for its geom id but rays skip it."""
-    group = f' group="{_ANALYTIC_GROUP}"' if floor is not None else ""
+    xml = _world_xml(
+        spec, objects, lidar_mounts or {}, analytic_floor=floor is not None, walkers=walkers
+    )
+    model = mujoco.MjModel.from_xml_string(xml)
+    geoms = _GeomTables.of(model, spec, objects, walkers)
+    groups = None
+    if floor is not None:
+        groups = np.ones(6, dtype=np.uint8)
+        groups[_ANALYTIC_GROUP] = 0
+    scene = Scene(
+        model=model,
+        data=mujoco.MjData(model),
+        objects=tuple(objects),
+        robot_body_id=model.body(ROBOT_BODY).id,
+        geom_object=geoms.geom_object,
+        object_geom=geoms.object_geom,
+        geom_reflectivity=geoms.reflectivity,
+        floor=floor,
+        walkers=tuple(walkers),
+        geom_walker=geoms.geom_walker,
+        ray_groups=groups,
+    )
+    scene.place_robot(np.eye(4))
+    scene.place_walkers(0.0)
+    return scene
+
+
+def _world_xml(
+    spec: SceneSpec,
+    objects: Sequence[SceneObject],
+    lidar_mounts: Mapping[str, Matrix4],
+    *,
+    analytic_floor: bool,
+    walkers: Sequence[Walker],
+) -> str:
+    """The MJCF of the world: the floor plane (in the group rays skip, for an analytic floor),
+    the objects' geoms, the robot's mocap body with its chassis and a site per LiDAR mount, then
+    a mocap body per walker."""
+    group = f' group="{_ANALYTIC_GROUP}"' if analytic_floor else ""
     geoms = [
         f'<geom name="{FLOOR_GEOM}" type="plane" size="{_f(spec.floor_half_size_m)} '
         f'{_f(spec.floor_half_size_m)} 0.1"{group}/>'
@@ -326,7 +364,7 @@ def build_scene(
         f'<geom name="chassis" type="box" size="{_f(sx / 2)} {_f(sy / 2)} {_f(sz / 2)}" '
         f'pos="0 0 {_f(sz / 2)}"/>'
     ]
-    for frame, T_base_lidar in (lidar_mounts or {}).items():
+    for frame, T_base_lidar in lidar_mounts.items():
         robot.append(f'<site name="{frame}" {_pose_xml(T_base_lidar)}/>')
     walker_bodies = [
         f'<body name="{_walker_body(k)}" mocap="true">'
@@ -334,7 +372,7 @@ def build_scene(
         + "</body>"
         for k, walker in enumerate(walkers)
     ]
-    xml = (
+    return (
         '<mujoco model="fleetcal-synth"><worldbody>'
         + "".join(geoms)
         + f'<body name="{ROBOT_BODY}" mocap="true">'
@@ -343,45 +381,46 @@ def build_scene(
         + "".join(walker_bodies)
         + "</worldbody></mujoco>"
     )
-    model = mujoco.MjModel.from_xml_string(xml)
-    data = mujoco.MjData(model)
-    geom_object = np.full(model.ngeom, -1, dtype=np.int32)
-    geom_walker = np.full(model.ngeom, -1, dtype=np.int32)
-    reflectivity = np.full(model.ngeom, spec.floor_reflectivity)
-    for index, obj in enumerate(objects):
-        geom_id = model.geom(f"object_{index}").id
-        geom_object[geom_id] = index
-        reflectivity[geom_id] = obj.reflectivity
-    walker_geoms = [model.geom(f"walker_{k}").id for k in range(len(walkers))]
-    for index, (geom_id, walker) in enumerate(zip(walker_geoms, walkers, strict=True)):
-        geom_object[geom_id] = NOT_STATIC
-        geom_walker[geom_id] = index
-        reflectivity[geom_id] = walker.reflectivity
-    groups = None
-    if floor is not None:
-        groups = np.ones(6, dtype=np.uint8)
-        groups[_ANALYTIC_GROUP] = 0
-    scene = Scene(
-        model=model,
-        data=data,
-        objects=tuple(objects),
-        robot_body_id=model.body(ROBOT_BODY).id,
-        geom_object=geom_object,
-        object_geom=np.array(
+
+
+@dataclass(frozen=True)
+class _GeomTables:
+    """What each geom of a built model is (`Scene`'s tables of the same names)."""
+
+    geom_object: NDArray[np.int32]
+    geom_walker: NDArray[np.int32]
+    object_geom: NDArray[np.int32]
+    reflectivity: NDArray[np.float64]
+
+    @classmethod
+    def of(
+        cls,
+        model: mujoco.MjModel,
+        spec: SceneSpec,
+        objects: Sequence[SceneObject],
+        walkers: Sequence[Walker],
+    ) -> _GeomTables:
+        """Looked up by the names `_world_xml` gave the geoms; every other geom (the floor, the
+        chassis) keeps -1 and the floor's reflectivity."""
+        geom_object = np.full(model.ngeom, -1, dtype=np.int32)
+        geom_walker = np.full(model.ngeom, -1, dtype=np.int32)
+        reflectivity = np.full(model.ngeom, spec.floor_reflectivity)
+        for index, obj in enumerate(objects):
+            geom_id = model.geom(f"object_{index}").id
+            geom_object[geom_id] = index
+            reflectivity[geom_id] = obj.reflectivity
+        walker_geoms = [model.geom(f"walker_{k}").id for k in range(len(walkers))]
+        for index, (geom_id, walker) in enumerate(zip(walker_geoms, walkers, strict=True)):
+            geom_object[geom_id] = NOT_STATIC
+            geom_walker[geom_id] = index
+            reflectivity[geom_id] = walker.reflectivity
+        object_geom = np.array(
             [model.geom(f"object_{k}").id for k in range(len(objects))]
             + walker_geoms
             + [model.geom(FLOOR_GEOM).id],
             dtype=np.int32,
-        ),
-        geom_reflectivity=reflectivity,
-        floor=floor,
-        walkers=tuple(walkers),
-        geom_walker=geom_walker,
-        ray_groups=groups,
-    )
-    scene.place_robot(np.eye(4))
-    scene.place_walkers(0.0)
-    return scene
+        )
+        return cls(geom_object, geom_walker, object_geom, reflectivity)
 
 
 def _walker_body(index: int) -> str:

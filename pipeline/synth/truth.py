@@ -267,9 +267,30 @@ def write_truth(truth: Truth, out_dir: Path) -> None:
 def load_truth(out_dir: Path | str) -> Truth:
     """Read the truth `write_recording` left in `out_dir` (labels included)."""
     out_dir = Path(out_dir)
-    path = out_dir / TRUTH_FILE
+    doc = _read_truth_json(out_dir / TRUTH_FILE)
+    labels = _read_labels(out_dir / doc["labels"]["file"], doc["labels"]["keys"])
+    return Truth(
+        scenario=doc["scenario"],
+        seed=doc["seed"],
+        rate_scale=doc["rate_scale"],
+        base_frame=doc["base_frame"],
+        odom_frame=doc["odom_frame"],
+        reference_frame=doc["reference_frame"],
+        lidars=tuple(_lidar_from_json(frame, entry) for frame, entry in doc["lidars"].items()),
+        stops=tuple(_stop_from_json(entry) for entry in doc["stops"]),
+        objects=tuple(_object_from_json(entry) for entry in doc["objects"]),
+        labels=labels,
+        scenario_class=doc.get("scenario_class", ""),
+        spec=doc.get("spec", {}),
+        floor=None if doc.get("floor") is None else FloorSurface.from_json(doc["floor"]),
+        walkers=tuple(Walker.from_json(entry) for entry in doc.get("walkers", [])),
+    )
+
+
+def _read_truth_json(path: Path) -> dict[str, Any]:
+    """`truth.json`, refused with what to do when it is missing, broken or of another schema."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        doc: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as err:
         raise BadInputError(
             f"cannot read {path}: {err}; point at a directory written by `fleetcal synth`"
@@ -279,58 +300,52 @@ def load_truth(out_dir: Path | str) -> Truth:
             f"{path} has schema_version {doc.get('schema_version')!r}, this code reads "
             f"{SCHEMA_VERSION}; synthesise the recording again"
         )
+    return doc
+
+
+def _read_labels(path: Path, keys: Mapping[str, Mapping[str, str]]) -> dict[str, ScanLabels]:
+    """Each frame's labels from `labels.npz`; `keys`: frame -> label name -> archive key."""
     labels: dict[str, ScanLabels] = {}
-    with np.load(out_dir / doc["labels"]["file"]) as archive:
-        for frame, keys in doc["labels"]["keys"].items():
-            arrays = {name: archive[key] for name, key in keys.items()}
+    with np.load(path) as archive:
+        for frame, frame_keys in keys.items():
+            arrays = {name: archive[key] for name, key in frame_keys.items()}
             # Recordings written before walkers and dust existed have neither label.
             for name in ("is_moving", "is_spurious"):
                 arrays.setdefault(name, np.zeros(len(arrays["is_bleeding"]), dtype=bool))
             labels[frame] = ScanLabels(**arrays)
-    return Truth(
-        scenario=doc["scenario"],
-        seed=doc["seed"],
-        rate_scale=doc["rate_scale"],
-        base_frame=doc["base_frame"],
-        odom_frame=doc["odom_frame"],
-        reference_frame=doc["reference_frame"],
-        lidars=tuple(
-            LidarTruth(
-                frame=frame,
-                topic=entry["topic"],
-                model=entry["model"],
-                optical_axis=np.asarray(entry["optical_axis"], dtype=np.float64),
-                scan_period_s=entry["scan_period_s"],
-                T_base_lidar_true=_pose_from_json(entry["T_base_lidar_true"]),
-                T_base_lidar_initial=_pose_from_json(entry["T_base_lidar_initial"]),
-            )
-            for frame, entry in doc["lidars"].items()
-        ),
-        stops=tuple(
-            StopTruth(
-                index=entry["index"],
-                t_start=entry["start"],
-                t_end=entry["end"],
-                T_odom_base_true=_pose_from_json(entry["T_odom_base_true"]),
-                T_odom_base_initial=_pose_from_json(entry["T_odom_base_initial"]),
-            )
-            for entry in doc["stops"]
-        ),
-        objects=tuple(
-            SceneObject(
-                kind=ObjectKind(entry["kind"]),
-                dimensions=entry["dimensions"],
-                T_world_object=_pose_from_json(entry["pose"]),
-                reflectivity=entry["reflectivity"],
-                role=ObjectRole(entry.get("role", ObjectRole.OBJECT.value)),
-            )
-            for entry in doc["objects"]
-        ),
-        labels=labels,
-        scenario_class=doc.get("scenario_class", ""),
-        spec=doc.get("spec", {}),
-        floor=None if doc.get("floor") is None else FloorSurface.from_json(doc["floor"]),
-        walkers=tuple(Walker.from_json(entry) for entry in doc.get("walkers", [])),
+    return labels
+
+
+def _lidar_from_json(frame: str, entry: Mapping[str, Any]) -> LidarTruth:
+    return LidarTruth(
+        frame=frame,
+        topic=entry["topic"],
+        model=entry["model"],
+        optical_axis=np.asarray(entry["optical_axis"], dtype=np.float64),
+        scan_period_s=entry["scan_period_s"],
+        T_base_lidar_true=_pose_from_json(entry["T_base_lidar_true"]),
+        T_base_lidar_initial=_pose_from_json(entry["T_base_lidar_initial"]),
+    )
+
+
+def _stop_from_json(entry: Mapping[str, Any]) -> StopTruth:
+    return StopTruth(
+        index=entry["index"],
+        t_start=entry["start"],
+        t_end=entry["end"],
+        T_odom_base_true=_pose_from_json(entry["T_odom_base_true"]),
+        T_odom_base_initial=_pose_from_json(entry["T_odom_base_initial"]),
+    )
+
+
+def _object_from_json(entry: Mapping[str, Any]) -> SceneObject:
+    """An object of `truth.json`; recordings written before roles existed hold only objects."""
+    return SceneObject(
+        kind=ObjectKind(entry["kind"]),
+        dimensions=entry["dimensions"],
+        T_world_object=_pose_from_json(entry["pose"]),
+        reflectivity=entry["reflectivity"],
+        role=ObjectRole(entry.get("role", ObjectRole.OBJECT.value)),
     )
 
 

@@ -34,9 +34,14 @@ import tempfile
 import time
 import uuid
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from service.db import Database
+    from service.models import RunKind, RunStatus
 
 MIB = 1024 * 1024
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -135,19 +140,7 @@ def bench_upload(size_mb: int, workdir: Path, repeat: int) -> list[dict[str, str
         "FLEETCAL_MAX_UPLOAD_BYTES": str(4 * size_mb * MIB),
     }
     key = _admin_key(env)
-    chunk = MCAP_MAGIC + os.urandom(MIB - len(MCAP_MAGIC))
-    rest = os.urandom(MIB)
-    count = size_mb
-    digest = hashlib.sha256(chunk)
-    for _ in range(count - 1):
-        digest.update(rest)
-    total = count * MIB
-
-    def body() -> Iterator[bytes]:
-        yield chunk
-        for _ in range(count - 1):
-            yield rest
-
+    upload = _Upload.random(size_mb)
     rows = []
     with server(env) as api:
         # Warm up (imports, first connection), then measure from a settled RSS.
@@ -155,49 +148,82 @@ def bench_upload(size_mb: int, workdir: Path, repeat: int) -> list[dict[str, str
         warm.request(
             "POST",
             "/v1/robots/warmup/runs?kind=end_of_line",
-            body=chunk,
+            body=upload.first,
             headers={"X-API-Key": key},
         )
         warm.getresponse().read()
         for attempt in range(repeat):
             time.sleep(0.5)
-            rss_before = api.rss_kib()
-            api.reset_peak()
-            cpu_before, client_before = api.cpu_seconds(), time.process_time()
-            connection = api.connection()
-            started = time.perf_counter()
-            connection.request(
-                "POST",
-                "/v1/robots/R1/runs?kind=end_of_line",
-                body=body(),
-                headers={
-                    "X-API-Key": key,
-                    "Content-Length": str(total),
-                    "X-Content-SHA256": digest.hexdigest(),
-                    "Content-Type": "application/octet-stream",
-                },
-            )
-            response = connection.getresponse()
-            text = response.read()
-            seconds = time.perf_counter() - started
-            peak = api.rss_kib("VmHWM")
-            server_cpu = api.cpu_seconds() - cpu_before
-            client_cpu = time.process_time() - client_before
-            if response.status != 202:
-                raise RuntimeError(f"upload failed: {response.status} {text[:500]!r}")
-            rows.append(
-                {
-                    "upload": f"#{attempt + 1}",
-                    "size": f"{total / 1e9:.2f} GB",
-                    "seconds": f"{seconds:.2f}",
-                    "throughput": f"{total / seconds / 1e6:.0f} MB/s",
-                    "server CPU": f"{server_cpu:.2f} s",
-                    "client CPU": f"{client_cpu:.2f} s",
-                    "server RSS before": f"{rss_before / 1024:.0f} MiB",
-                    "server peak RSS growth": f"{(peak - rss_before) / 1024:.1f} MiB",
-                }
-            )
+            rows.append({"upload": f"#{attempt + 1}", **_time_upload(api, key, upload)})
     return rows
+
+
+@dataclass(frozen=True)
+class _Upload:
+    """A recording's body of `count` MiB: `first` (MCAP's magic, then random bytes), then
+    `count - 1` times the same random MiB `rest`, sent one MiB per write."""
+
+    first: bytes
+    rest: bytes
+    count: int
+    sha256: str
+
+    @classmethod
+    def random(cls, size_mb: int) -> _Upload:
+        first = MCAP_MAGIC + os.urandom(MIB - len(MCAP_MAGIC))
+        rest = os.urandom(MIB)
+        digest = hashlib.sha256(first)
+        for _ in range(size_mb - 1):
+            digest.update(rest)
+        return cls(first, rest, size_mb, digest.hexdigest())
+
+    @property
+    def size(self) -> int:
+        return self.count * MIB
+
+    def body(self) -> Iterator[bytes]:
+        yield self.first
+        for _ in range(self.count - 1):
+            yield self.rest
+
+
+def _time_upload(api: Server, key: str, upload: _Upload) -> dict[str, str]:
+    """One upload's wall time, throughput, server and client CPU time, and the server's peak
+    RSS growth over its RSS before."""
+    rss_before = api.rss_kib()
+    api.reset_peak()
+    cpu_before, client_before = api.cpu_seconds(), time.process_time()
+    connection = api.connection()
+    started = time.perf_counter()
+    connection.request(
+        "POST",
+        "/v1/robots/R1/runs?kind=end_of_line",
+        body=upload.body(),
+        headers={
+            "X-API-Key": key,
+            "Content-Length": str(upload.size),
+            "X-Content-SHA256": upload.sha256,
+            "Content-Type": "application/octet-stream",
+        },
+    )
+    response = connection.getresponse()
+    text = response.read()
+    seconds = time.perf_counter() - started
+    peak = api.rss_kib("VmHWM")
+    server_cpu = api.cpu_seconds() - cpu_before
+    client_cpu = time.process_time() - client_before
+    if response.status != 202:
+        raise RuntimeError(f"upload failed: {response.status} {text[:500]!r}")
+    total = upload.size
+    return {
+        "size": f"{total / 1e9:.2f} GB",
+        "seconds": f"{seconds:.2f}",
+        "throughput": f"{total / seconds / 1e6:.0f} MB/s",
+        "server CPU": f"{server_cpu:.2f} s",
+        "client CPU": f"{client_cpu:.2f} s",
+        "server RSS before": f"{rss_before / 1024:.0f} MiB",
+        "server peak RSS growth": f"{(peak - rss_before) / 1024:.1f} MiB",
+    }
 
 
 # -- queries ---------------------------------------------------------------------------------------
@@ -209,21 +235,39 @@ def _document(rear_x: float, passed: bool, final: float) -> dict[str, object]:
     return result_document(passed=passed, final=final, rear_x=rear_x)
 
 
+SEED_START = datetime(2025, 1, 1, tzinfo=UTC)
+SEED_SPAN_S = timedelta(days=365).total_seconds()
+SEED_BATCH = 5000
+"""Runs per bulk insert."""
+
+
 def seed(database_url: str, *, runs: int, robots: int, seed_value: int = 7) -> list[str]:
     """Insert `runs` runs spread over `robots` robots, as a year of a fleet's activity."""
-    from sqlalchemy import insert
-
     from service.db import Database
-    from service.models import LidarExtrinsic, Result, Robot, Run, RunKind, RunStatus
     from service.settings import Settings
 
     rng = random.Random(seed_value)
     db = Database.from_settings(Settings(database_url=database_url))
     db.upgrade()
     robot_ids = [f"AMR-{i:05d}" for i in range(robots)]
-    start = datetime(2025, 1, 1, tzinfo=UTC)
-    span = timedelta(days=365).total_seconds()
     now = datetime.now(UTC)
+    _insert_robots(db, robot_ids)
+    rows = _SeedRows()
+    for index in range(runs):
+        rows.draw_run(rng, robot_ids[index % robots], now)
+        if len(rows.runs) >= SEED_BATCH:
+            rows.flush(db)
+    rows.flush(db)
+    _analyze(db)
+    db.dispose()
+    return robot_ids
+
+
+def _insert_robots(db: Database, robot_ids: list[str]) -> None:
+    from sqlalchemy import insert
+
+    from service.models import Robot
+
     with db.transaction() as session:
         session.execute(
             insert(Robot),
@@ -232,31 +276,29 @@ def seed(database_url: str, *, runs: int, robots: int, seed_value: int = 7) -> l
                     "id": r,
                     "model": f"mk{i % 3 + 1}",
                     "meta": {"site": f"site-{i % 7}"},
-                    "created_at": start,
-                    "updated_at": start,
+                    "created_at": SEED_START,
+                    "updated_at": SEED_START,
                 }
                 for i, r in enumerate(robot_ids)
             ],
         )
-    batch: list[dict[str, object]] = []
-    results: list[dict[str, object]] = []
-    extrinsics: list[dict[str, object]] = []
 
-    def flush() -> None:
-        with db.transaction() as session:
-            if batch:
-                session.execute(insert(Run), batch)
-            if results:
-                session.execute(insert(Result), results)
-            if extrinsics:
-                session.execute(insert(LidarExtrinsic), extrinsics)
-        batch.clear()
-        results.clear()
-        extrinsics.clear()
 
-    for index in range(runs):
-        robot = robot_ids[index % robots]
-        created = start + timedelta(seconds=rng.random() * span)
+@dataclass
+class _SeedRows:
+    """Rows waiting for a bulk insert: runs, the results of those that succeeded, and two
+    extrinsics rows per result."""
+
+    runs: list[dict[str, object]] = field(default_factory=list)
+    results: list[dict[str, object]] = field(default_factory=list)
+    extrinsics: list[dict[str, object]] = field(default_factory=list)
+
+    def draw_run(self, rng: random.Random, robot: str, now: datetime) -> None:
+        """A run of `robot` at a random time of the year: 90 % succeeded, 5 % failed, 4 %
+        queued, 1 % running; 80 % maintenance runs. One that succeeded has a result."""
+        from service.models import RunKind, RunStatus
+
+        created = SEED_START + timedelta(seconds=rng.random() * SEED_SPAN_S)
         draw = rng.random()
         status = (
             RunStatus.SUCCEEDED
@@ -267,81 +309,121 @@ def seed(database_url: str, *, runs: int, robots: int, seed_value: int = 7) -> l
             if draw < 0.99
             else RunStatus.RUNNING
         )
+        kind = RunKind.MAINTENANCE if rng.random() < 0.8 else RunKind.END_OF_LINE
         run_id = uuid.uuid4()
-        batch.append(
-            {
-                "id": run_id,
-                "robot_id": robot,
-                "kind": RunKind.MAINTENANCE if rng.random() < 0.8 else RunKind.END_OF_LINE,
-                "status": status,
-                "upload_size": 300 * MIB,
-                "upload_sha256": "0" * 64,
-                "upload_format": "mcap",
-                "storage_key": f"recordings/{robot}/{run_id}",
-                "idempotency_key": None,
-                "config": None,
-                "attempts": 1,
-                "max_attempts": 3,
-                "available_at": created,
-                "created_at": created,
-                "updated_at": now,
-                "started_at": created if status != RunStatus.QUEUED else None,
-                "finished_at": created + timedelta(seconds=40)
-                if status in (RunStatus.SUCCEEDED, RunStatus.FAILED)
-                else None,
-                "error": {
-                    "type": "urn:fleetcal:problem:no-lidar-data",
-                    "title": "No LiDAR data",
-                    "status": 422,
-                    "detail": "no PointCloud2 topic",
-                }
-                if status == RunStatus.FAILED
-                else None,
-            }
-        )
+        self.runs.append(_run_row(run_id, robot, kind, status, created, now))
         if status == RunStatus.SUCCEEDED:
             final = abs(rng.gauss(0.0015, 0.001))
-            passed = final < 0.004
             rear_x = -0.41 + rng.gauss(0, 0.002)
-            results.append(
+            self._add_result(run_id, robot, created, final, rear_x)
+
+    def _add_result(
+        self, run_id: uuid.UUID, robot: str, created: datetime, final: float, rear_x: float
+    ) -> None:
+        """The result (passed below 4 mm, accepted as it passed: no operator overrode it) and
+        its two LiDARs' extrinsics."""
+        passed = final < 0.004
+        self.results.append(
+            {
+                "run_id": run_id,
+                "robot_id": robot,
+                "document": _document(rear_x, passed, final),
+                "passed": passed,
+                "accepted": passed,
+                "metric_error_initial": 0.021,
+                "metric_error_final": final,
+                "pipeline_version": "0.1.0",
+                "config_hash": "sha256:" + "ab" * 32,
+                "measured_at": created,
+                "created_at": created,
+            }
+        )
+        for frame, x, is_reference in (
+            ("lidar_front", 0.45, True),
+            ("lidar_rear", rear_x, False),
+        ):
+            self.extrinsics.append(
                 {
                     "run_id": run_id,
                     "robot_id": robot,
-                    "document": _document(rear_x, passed, final),
-                    "passed": passed,
-                    "metric_error_initial": 0.021,
-                    "metric_error_final": final,
-                    "pipeline_version": "0.1.0",
-                    "config_hash": "sha256:" + "ab" * 32,
+                    "frame": frame,
                     "measured_at": created,
-                    "created_at": created,
+                    "passed": passed,
+                    "accepted": passed,
+                    "is_reference": is_reference,
+                    "tx": x,
+                    "ty": 0.0,
+                    "tz": 0.62,
+                    "qx": 0.0,
+                    "qy": 0.0,
+                    "qz": 0.0,
+                    "qw": 1.0,
+                    "stddev": None,
                 }
             )
-            for frame, x, is_reference in (
-                ("lidar_front", 0.45, True),
-                ("lidar_rear", rear_x, False),
-            ):
-                extrinsics.append(
-                    {
-                        "run_id": run_id,
-                        "robot_id": robot,
-                        "frame": frame,
-                        "measured_at": created,
-                        "passed": passed,
-                        "is_reference": is_reference,
-                        "tx": x,
-                        "ty": 0.0,
-                        "tz": 0.62,
-                        "qx": 0.0,
-                        "qy": 0.0,
-                        "qz": 0.0,
-                        "qw": 1.0,
-                        "stddev": None,
-                    }
-                )
-        if len(batch) >= 5000:
-            flush()
-    flush()
+
+    def flush(self, db: Database) -> None:
+        from sqlalchemy import insert
+
+        from service.models import LidarExtrinsic, Result, Run
+
+        with db.transaction() as session:
+            if self.runs:
+                session.execute(insert(Run), self.runs)
+            if self.results:
+                session.execute(insert(Result), self.results)
+            if self.extrinsics:
+                session.execute(insert(LidarExtrinsic), self.extrinsics)
+        self.runs.clear()
+        self.results.clear()
+        self.extrinsics.clear()
+
+
+def _run_row(
+    run_id: uuid.UUID,
+    robot: str,
+    kind: RunKind,
+    status: RunStatus,
+    created: datetime,
+    now: datetime,
+) -> dict[str, object]:
+    """A run as the API stores it, uploaded at `created` (a 300 MiB MCAP recording); one that
+    ended took 40 s, one that failed has no LiDAR data."""
+    from service.models import RunStatus
+
+    return {
+        "id": run_id,
+        "robot_id": robot,
+        "kind": kind,
+        "status": status,
+        "upload_size": 300 * MIB,
+        "upload_sha256": "0" * 64,
+        "upload_format": "mcap",
+        "storage_key": f"recordings/{robot}/{run_id}",
+        "idempotency_key": None,
+        "config": None,
+        "attempts": 1,
+        "max_attempts": 3,
+        "available_at": created,
+        "created_at": created,
+        "updated_at": now,
+        "started_at": created if status != RunStatus.QUEUED else None,
+        "finished_at": created + timedelta(seconds=40)
+        if status in (RunStatus.SUCCEEDED, RunStatus.FAILED)
+        else None,
+        "error": {
+            "type": "urn:fleetcal:problem:no-lidar-data",
+            "title": "No LiDAR data",
+            "status": 422,
+            "detail": "no PointCloud2 topic",
+        }
+        if status == RunStatus.FAILED
+        else None,
+    }
+
+
+def _analyze(db: Database) -> None:
+    """Statistics for the query planner, as a database that has lived a year would have."""
     if db.engine.dialect.name == "postgresql":
         with db.engine.connect() as connection:
             connection.exec_driver_sql("ANALYZE")
@@ -349,8 +431,6 @@ def seed(database_url: str, *, runs: int, robots: int, seed_value: int = 7) -> l
     else:
         with db.engine.connect() as connection:
             connection.exec_driver_sql("ANALYZE")
-    db.dispose()
-    return robot_ids
 
 
 QUERIES = {

@@ -18,6 +18,7 @@ from service.models import RunStatus
 from service.settings import Settings
 from tests.reliability.harness import (
     QUICK,
+    Process,
     processes,
     run_row,
     start_worker,
@@ -69,6 +70,10 @@ def held(db: Database, run_id: uuid.UUID, attempt: int, stage: str | None = None
     )
 
 
+Stages = dict[str, tuple[str, ...]]
+"""Run name -> the stages its worker is killed in, one per attempt."""
+
+
 def test_a_worker_killed_in_each_stage_leaves_the_run_to_finish_once(
     settings: Settings, db: Database, tiny_recording: bytes, tmp_path: Path
 ) -> None:
@@ -88,32 +93,8 @@ def test_a_worker_killed_in_each_stage_leaves_the_run_to_finish_once(
         )
         for name, names in stages.items()
     }
-
-    def both_held(attempt: int, in_stage: bool) -> bool:
-        """Each run held at `attempt` (in its stage), or, past its stages, finished."""
-        return all(
-            held(db, runs[name], attempt, names[attempt - 1] if in_stage else None)
-            if attempt <= len(names)
-            else not in_stage or run_row(db, runs[name]).status == RunStatus.SUCCEEDED
-            for name, names in stages.items()
-        )
-
     with processes() as workers:
-        log = tmp_path / "worker-1.log"
-        workers.append(start_worker(settings, PAUSED_CALIBRATION, log, concurrency=2))
-        for attempt in range(1, half + 1):
-            doomed = workers[-1]
-            wait_for(f"attempt {attempt}", partial(both_held, attempt, False), WAIT_S)
-            # The next worker starts while this one calibrates: it waits for the leases to lapse.
-            log = tmp_path / f"worker-{attempt + 1}.log"
-            workers.append(start_worker(settings, PAUSED_CALIBRATION, log, concurrency=2))
-            in_stages = [names[attempt - 1] for names in stages.values() if attempt <= len(names)]
-            wait_for(f"attempt {attempt} in {in_stages}", partial(both_held, attempt, True), WAIT_S)
-            doomed.kill()
-            assert both_held(attempt, True), "the kill neither ended nor released a run"
-            for name, names in stages.items():
-                if attempt <= len(names):
-                    assert stored_results(db, runs[name]) == (0, 0)
+        _kill_a_worker_per_attempt(workers, settings, db, runs, stages, tmp_path)
 
         def ended() -> bool:
             final = (RunStatus.SUCCEEDED, RunStatus.FAILED)
@@ -132,6 +113,47 @@ def test_a_worker_killed_in_each_stage_leaves_the_run_to_finish_once(
         assert found is not None and found[1] is not None
         document = found[1].document
     assert document["drift"]["against"] == "design" and document["report"]["images"]
+
+
+def _kill_a_worker_per_attempt(
+    workers: list[Process],
+    settings: Settings,
+    db: Database,
+    runs: dict[str, uuid.UUID],
+    stages: Stages,
+    tmp_path: Path,
+) -> None:
+    """Start a worker, and at each attempt, once both runs are in that attempt's stages (with
+    the next worker started and waiting), kill the one holding them; the last worker started
+    is left to finish them."""
+    both_held = partial(_both_held, db, runs, stages)
+    log = tmp_path / "worker-1.log"
+    workers.append(start_worker(settings, PAUSED_CALIBRATION, log, concurrency=2))
+    for attempt in range(1, max(map(len, stages.values())) + 1):
+        doomed = workers[-1]
+        wait_for(f"attempt {attempt}", partial(both_held, attempt, False), WAIT_S)
+        # The next worker starts while this one calibrates: it waits for the leases to lapse.
+        log = tmp_path / f"worker-{attempt + 1}.log"
+        workers.append(start_worker(settings, PAUSED_CALIBRATION, log, concurrency=2))
+        in_stages = [names[attempt - 1] for names in stages.values() if attempt <= len(names)]
+        wait_for(f"attempt {attempt} in {in_stages}", partial(both_held, attempt, True), WAIT_S)
+        doomed.kill()
+        assert both_held(attempt, True), "the kill neither ended nor released a run"
+        for name, names in stages.items():
+            if attempt <= len(names):
+                assert stored_results(db, runs[name]) == (0, 0)
+
+
+def _both_held(
+    db: Database, runs: dict[str, uuid.UUID], stages: Stages, attempt: int, in_stage: bool
+) -> bool:
+    """Each run held at `attempt` (in its stage), or, past its stages, finished."""
+    return all(
+        held(db, runs[name], attempt, names[attempt - 1] if in_stage else None)
+        if attempt <= len(names)
+        else not in_stage or run_row(db, runs[name]).status == RunStatus.SUCCEEDED
+        for name, names in stages.items()
+    )
 
 
 def test_one_of_two_workers_killed_while_the_other_calibrates(

@@ -15,43 +15,9 @@ def result_document(
         "reference_frame": "lidar_front",
         "base_frame": "base_link",
         "lidars": {
-            "lidar_front": {
-                "topic": "/lidar_front/points",
-                "initial": {"translation": [0.45, 0.0, 0.62], "rotation_xyzw": [0, 0, 0, 1]},
-                "calibrated": {
-                    "translation": [0.45, 0.0, 0.62],
-                    "rotation_xyzw": [0.0, 0.0, 0.0, 1.0],
-                },
-                "stddev": {"translation_m": [0, 0, 0], "rotation_deg": [0, 0, 0]},
-            },
-            "lidar_rear": {
-                "topic": "/lidar_rear/points",
-                "initial": {
-                    "translation": [-0.5, 0.02, 0.6],
-                    "rotation_xyzw": [0.0, 0.0, 0.9999619, 0.0087265],
-                },
-                "calibrated": {
-                    "translation": [rear_x, 0.004, 0.618],
-                    "rotation_xyzw": [0.0012, -0.0008, 0.9999985, 0.0009],
-                },
-                "stddev": {
-                    "translation_m": [0.0011, 0.0009, 0.0014],
-                    "rotation_deg": [0.02, 0.03, 0.01],
-                },
-            },
-            "lidar_left": {
-                "topic": "/lidar_left/points",
-                "initial": {
-                    "translation": [0.0, 0.3, 0.6],
-                    "rotation_xyzw": [0, 0, 0.7071, 0.7071],
-                },
-                "calibrated": None,  # floor only: no object constrains x, y and yaw
-                "stddev": {
-                    "translation_m": [None, None, 0.0021],
-                    "rotation_deg": [0.03, 0.04, None],
-                },
-                "undetermined": ["x", "y", "yaw"],
-            },
+            "lidar_front": _reference_lidar(),
+            "lidar_rear": _calibrated_lidar(rear_x),
+            "lidar_left": _undetermined_lidar(),
         },
         "metric_error": {"initial": 0.021, "final": final},
         "verdict": {
@@ -69,4 +35,53 @@ def result_document(
         },
         "pipeline_version": "0.1.0",
         "config_hash": "sha256:" + "ab" * 32,
+    }
+
+
+def _reference_lidar() -> dict[str, Any]:
+    """The reference LiDAR: calibrated where it started, without uncertainty."""
+    return {
+        "topic": "/lidar_front/points",
+        "initial": {"translation": [0.45, 0.0, 0.62], "rotation_xyzw": [0, 0, 0, 1]},
+        "calibrated": {
+            "translation": [0.45, 0.0, 0.62],
+            "rotation_xyzw": [0.0, 0.0, 0.0, 1.0],
+        },
+        "stddev": {"translation_m": [0, 0, 0], "rotation_deg": [0, 0, 0]},
+    }
+
+
+def _calibrated_lidar(x: float) -> dict[str, Any]:
+    """The rear LiDAR, calibrated at `x` (m) behind the base."""
+    return {
+        "topic": "/lidar_rear/points",
+        "initial": {
+            "translation": [-0.5, 0.02, 0.6],
+            "rotation_xyzw": [0.0, 0.0, 0.9999619, 0.0087265],
+        },
+        "calibrated": {
+            "translation": [x, 0.004, 0.618],
+            "rotation_xyzw": [0.0012, -0.0008, 0.9999985, 0.0009],
+        },
+        "stddev": {
+            "translation_m": [0.0011, 0.0009, 0.0014],
+            "rotation_deg": [0.02, 0.03, 0.01],
+        },
+    }
+
+
+def _undetermined_lidar() -> dict[str, Any]:
+    """The left LiDAR, which saw only the floor."""
+    return {
+        "topic": "/lidar_left/points",
+        "initial": {
+            "translation": [0.0, 0.3, 0.6],
+            "rotation_xyzw": [0, 0, 0.7071, 0.7071],
+        },
+        "calibrated": None,  # floor only: no object constrains x, y and yaw
+        "stddev": {
+            "translation_m": [None, None, 0.0021],
+            "rotation_deg": [0.03, 0.04, None],
+        },
+        "undetermined": ["x", "y", "yaw"],
     }

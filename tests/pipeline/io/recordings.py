@@ -120,93 +120,18 @@ def _pose_since_start(spec: Spec, rel: float, *, with_error: bool = False) -> Ma
 def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth:
     """Write the recording of `spec` at `path` in `fmt`; return its truth."""
     rng = np.random.default_rng(spec.seed)
-    cycle = spec.dwell_s + spec.move_s
     initial = {name: TRUE_EXTRINSICS[name] @ PERTURBATION for name in spec.lidars}
-    n_zero = int(spec.points * spec.zero_fraction)
-    n_nan = {
-        name: int(spec.points * spec.nan_fraction_of.get(name, spec.nan_fraction))
-        for name in spec.lidars
-    }
-    n_nan = {name: min(n, spec.points - n_zero) for name, n in n_nan.items()}
-    n_valid = {name: spec.points - n_nan[name] - n_zero for name in spec.lidars}
-    f = spec.frame_prefix
-    T_footprint_base = from_xyz_rpy([0.0, 0.0, spec.footprint_height or 0.0], [0.0, 0.0, 0.0])
+    counts = _point_counts(spec)
     with RecordingWriter(path, fmt, header_clock_offset_ns=spec.header_clock_offset_ns) as writer:
         if spec.tf_static:
-            edges = (
-                [(f + "base_link", f + "lidar_front", initial["lidar_front"])]
-                if "lidar_front" in initial
-                else []
-            )
-            if "lidar_rear" in initial:
-                # Perturb the chain's last edge so that the composed chain equals `initial`.
-                T_mount_rear = invert(T_BASE_MOUNT) @ initial["lidar_rear"]
-                edges += [
-                    (f + "base_link", f + "rear_mount", T_BASE_MOUNT),
-                    (f + "rear_mount", f + "lidar_rear", T_mount_rear),
-                ]
-            if spec.footprint_height is not None:
-                edges.append((f + "base_footprint", f + "base_link", T_footprint_base))
-            writer.write_transforms(int(spec.t0 * NS), edges, static=True)
-        for stamp in _stamps_ns(spec, spec.odom_hz).tolist():
-            T = _pose_since_start(spec, (stamp - round(spec.t0 * NS)) / NS, with_error=True)
-            child = "base_link"
-            if spec.footprint_height is not None:
-                T, child = T @ invert(T_footprint_base), "base_footprint"
-            if spec.trajectory == "odometry":
-                writer.write_odometry(
-                    "/odom", stamp, T, odom_frame=f + "odom", base_frame=f + child
-                )
-            elif spec.trajectory == "tf":
-                writer.write_transforms(stamp, [(f + "odom", f + child, T)])
+            writer.write_transforms(int(spec.t0 * NS), _static_edges(spec, initial), static=True)
+        _write_trajectory(writer, spec)
         for stamp in _stamps_ns(spec, spec.scan_hz).tolist():
             t = spec.t0 + (stamp - round(spec.t0 * NS)) / NS
             for name in spec.lidars:
-                if name in spec.models:
-                    points, beams = _model_scan(spec, spec.models[name], t, rng)
-                else:
-                    points, beams = _floor_scan(
-                        spec, name, t, (n_valid[name], n_nan[name], n_zero), rng
-                    )
-                fields: dict[str, NDArray[Any]] = {"intensity": rng.uniform(0, 100, len(points))}
-                if name in spec.ring_lidars:
-                    fields[spec.beam_field] = beams
-                dtype = np.float64 if name in spec.float64_lidars else np.float32
-                big_endian = name in spec.big_endian_lidars
-                if name in spec.organised_lidars:
-                    write_organised_cloud(
-                        writer,
-                        f"/{name}/points",
-                        stamp,
-                        f + name,
-                        points,
-                        fields,
-                        spec.organised_rows,
-                        dtype=dtype,
-                    )
-                else:
-                    writer.write_pointcloud(
-                        f"/{name}/points",
-                        stamp,
-                        f + name,
-                        points,
-                        extra_fields=fields,
-                        dtype=dtype,
-                        big_endian=big_endian,
-                    )
-            for k, topic in enumerate(spec.radar_topics):
-                detections = rng.uniform(-20, 20, (30, 3))
-                writer.write_pointcloud(
-                    topic,
-                    stamp,
-                    f"{f}radar_{k}",
-                    detections,
-                    extra_fields={
-                        "rcs": rng.uniform(-10, 30, 30).astype(np.float32),
-                        "v_r": rng.uniform(-5, 5, 30).astype(np.float32),
-                        "snr": rng.uniform(0, 40, 30).astype(np.float32),
-                    },
-                )
+                _write_lidar_scan(writer, spec, name, stamp, t, counts[name], rng)
+            _write_radar_scans(writer, spec, stamp, rng)
+    cycle = spec.dwell_s + spec.move_s
     spans = [(spec.t0 + k * cycle, spec.t0 + k * cycle + spec.dwell_s) for k in range(spec.stops)]
     return Truth(
         stop_spans=spans,
@@ -214,8 +139,123 @@ def write_recording(path: Path, fmt: WriterFormat, spec: Spec = Spec()) -> Truth
         T_odom_base_odometry=[pose_at(spec, a + 0.5, with_error=True) for a, _ in spans],
         T_base_lidar={name: TRUE_EXTRINSICS[name] for name in spec.lidars},
         T_base_lidar_initial=initial,
-        valid_per_scan=n_valid,
+        valid_per_scan={name: valid for name, (valid, _nan, _zero) in counts.items()},
     )
+
+
+def _point_counts(spec: Spec) -> dict[str, tuple[int, int, int]]:
+    """Per LiDAR: valid, NaN and zero points of each floor scan (NaN ones capped so that the
+    zero ones always fit)."""
+    n_zero = int(spec.points * spec.zero_fraction)
+    counts = {}
+    for name in spec.lidars:
+        n_nan = int(spec.points * spec.nan_fraction_of.get(name, spec.nan_fraction))
+        n_nan = min(n_nan, spec.points - n_zero)
+        counts[name] = (spec.points - n_nan - n_zero, n_nan, n_zero)
+    return counts
+
+
+def _footprint(spec: Spec) -> Matrix4:
+    """`T_footprint_base`: `base_link` `footprint_height` above `base_footprint` (or on it)."""
+    return from_xyz_rpy([0.0, 0.0, spec.footprint_height or 0.0], [0.0, 0.0, 0.0])
+
+
+def _static_edges(spec: Spec, initial: Mapping[str, Matrix4]) -> list[tuple[str, str, Matrix4]]:
+    """The tf_static edges (parent, child, `T_parent_child`) whose chains give `initial`."""
+    f = spec.frame_prefix
+    edges = (
+        [(f + "base_link", f + "lidar_front", initial["lidar_front"])]
+        if "lidar_front" in initial
+        else []
+    )
+    if "lidar_rear" in initial:
+        # Perturb the chain's last edge so that the composed chain equals `initial`.
+        T_mount_rear = invert(T_BASE_MOUNT) @ initial["lidar_rear"]
+        edges += [
+            (f + "base_link", f + "rear_mount", T_BASE_MOUNT),
+            (f + "rear_mount", f + "lidar_rear", T_mount_rear),
+        ]
+    if spec.footprint_height is not None:
+        edges.append((f + "base_footprint", f + "base_link", _footprint(spec)))
+    return edges
+
+
+def _write_trajectory(writer: RecordingWriter, spec: Spec) -> None:
+    """The odometry (with its error) as `spec.trajectory` says: Odometry messages on `/odom`,
+    dynamic tf, or nothing."""
+    f = spec.frame_prefix
+    T_footprint_base = _footprint(spec)
+    for stamp in _stamps_ns(spec, spec.odom_hz).tolist():
+        T = _pose_since_start(spec, (stamp - round(spec.t0 * NS)) / NS, with_error=True)
+        child = "base_link"
+        if spec.footprint_height is not None:
+            T, child = T @ invert(T_footprint_base), "base_footprint"
+        if spec.trajectory == "odometry":
+            writer.write_odometry("/odom", stamp, T, odom_frame=f + "odom", base_frame=f + child)
+        elif spec.trajectory == "tf":
+            writer.write_transforms(stamp, [(f + "odom", f + child, T)])
+
+
+def _write_lidar_scan(
+    writer: RecordingWriter,
+    spec: Spec,
+    name: str,
+    stamp: int,
+    t: float,
+    counts: tuple[int, int, int],
+    rng: np.random.Generator,
+) -> None:
+    """LiDAR `name`'s scan at `t` (its model's firing, or floor points with `counts` of valid,
+    NaN and zero ones), in the field layout, type, byte order and organisation `spec` gives it."""
+    if name in spec.models:
+        points, beams = _model_scan(spec, spec.models[name], t, rng)
+    else:
+        points, beams = _floor_scan(spec, name, t, counts, rng)
+    fields: dict[str, NDArray[Any]] = {"intensity": rng.uniform(0, 100, len(points))}
+    if name in spec.ring_lidars:
+        fields[spec.beam_field] = beams
+    dtype = np.float64 if name in spec.float64_lidars else np.float32
+    frame_id = spec.frame_prefix + name
+    if name in spec.organised_lidars:
+        write_organised_cloud(
+            writer,
+            f"/{name}/points",
+            stamp,
+            frame_id,
+            points,
+            fields,
+            spec.organised_rows,
+            dtype=dtype,
+        )
+    else:
+        writer.write_pointcloud(
+            f"/{name}/points",
+            stamp,
+            frame_id,
+            points,
+            extra_fields=fields,
+            dtype=dtype,
+            big_endian=name in spec.big_endian_lidars,
+        )
+
+
+def _write_radar_scans(
+    writer: RecordingWriter, spec: Spec, stamp: int, rng: np.random.Generator
+) -> None:
+    """30 random detections with a radar's fields on each of `spec.radar_topics`."""
+    for k, topic in enumerate(spec.radar_topics):
+        detections = rng.uniform(-20, 20, (30, 3))
+        writer.write_pointcloud(
+            topic,
+            stamp,
+            f"{spec.frame_prefix}radar_{k}",
+            detections,
+            extra_fields={
+                "rcs": rng.uniform(-10, 30, 30).astype(np.float32),
+                "v_r": rng.uniform(-5, 5, 30).astype(np.float32),
+                "snr": rng.uniform(0, 40, 30).astype(np.float32),
+            },
+        )
 
 
 def _floor_scan(
@@ -273,7 +313,7 @@ def write_organised_cloud(
         record[name] = values
     codes = {"u1": 2, "u2": 4, "i4": 5, "u4": 6, "f4": 7, "f8": 8}
     point_field = writer.types["sensor_msgs/msg/PointField"]
-    offsets = record.dtype.fields or {}
+    offsets: Mapping[str, tuple[Any, ...]] = record.dtype.fields or {}
     rows_bytes = record.view(np.uint8).reshape(rows, columns * record.dtype.itemsize)
     padded = np.concatenate([rows_bytes, np.zeros((rows, row_padding), np.uint8)], axis=1)
     types = writer.types
@@ -285,7 +325,7 @@ def write_organised_cloud(
         width=columns,
         fields=[
             point_field(name=name, offset=int(offset), datatype=codes[sub.str[1:]], count=1)
-            for name, (sub, offset) in offsets.items()
+            for name, (sub, offset, *_title) in offsets.items()
         ],
         is_bigendian=False,
         point_step=record.dtype.itemsize,

@@ -15,7 +15,7 @@ and yaw undetermined.
 from __future__ import annotations
 
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -218,7 +218,38 @@ def drift_checks(
 
 
 def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[str, bytes]) -> Fleet:
-    now = datetime.now(UTC)
+    fleet = _Seeding(db, storage, recording, images, datetime.now(UTC))
+    _seed_profile(db)
+    eol, hit, repaired = _seed_r1(fleet)
+    failed = _seed_failed(fleet)
+    running = _seed_running(fleet)
+    r4 = _seed_r4(fleet)
+    undetermined = fleet.upload("R5", RunKind.END_OF_LINE, timedelta(hours=5))
+    fleet.documents[undetermined] = undetermined_document()
+    with db.transaction() as session:
+        repository.store_result(session, undetermined, fleet.documents[undetermined])
+    return Fleet(eol, hit, repaired, failed, running, r4[:2], r4[2], undetermined, fleet.documents)
+
+
+@dataclass(frozen=True)
+class _Seeding:
+    """What the seeded runs share: where they are written, the recording and report images
+    each has, the time the fleet is seeded at, and the result documents stored so far."""
+
+    db: Database
+    storage: Storage
+    recording: bytes
+    images: dict[str, bytes]
+    now: datetime
+    documents: dict[uuid.UUID, dict[str, Any]] = field(default_factory=dict)
+
+    def upload(self, robot: str, kind: RunKind, ago: timedelta) -> uuid.UUID:
+        """A run of `robot` as if its recording had come in `ago` before now."""
+        return _upload(self.db, self.storage, self.recording, robot, kind, self.now - ago)
+
+
+def _seed_profile(db: Database) -> None:
+    """The `demo-bot` tolerance profile with drift limits, and its robots R1 and R4."""
     with db.transaction() as session:
         repository.put_tolerance_profile(
             session,
@@ -231,12 +262,16 @@ def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[st
         repository.put_robot(session, "R1", model="demo-bot", metadata={"site": "line 2"})
         repository.put_robot(session, "R4", model="demo-bot", metadata={"site": "line 3"})
 
-    documents: dict[uuid.UUID, dict[str, Any]] = {}
-    eol = _upload(db, storage, recording, "R1", RunKind.END_OF_LINE, now - timedelta(days=20))
+
+def _seed_r1(fleet: _Seeding) -> tuple[uuid.UUID, uuid.UUID, uuid.UUID]:
+    """End-of-line 20 days ago, a maintenance run failed on drift (a hit mount) 10 days ago,
+    one passed again yesterday; their results stored with report images and stage times."""
+    documents = fleet.documents
+    eol = fleet.upload("R1", RunKind.END_OF_LINE, timedelta(days=20))
     documents[eol] = result_document(
         TRUE_EXTRINSICS, metric=(0.0912, 0.0015), checks=[metric_check(0.0015)]
     )
-    hit = _upload(db, storage, recording, "R1", RunKind.MAINTENANCE, now - timedelta(days=10))
+    hit = fleet.upload("R1", RunKind.MAINTENANCE, timedelta(days=10))
     documents[hit] = result_document(
         HIT,
         metric=(0.0261, 0.0016),
@@ -244,7 +279,7 @@ def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[st
         drift_from=TRUE_EXTRINSICS,
         drift_run=eol,
     )
-    repaired = _upload(db, storage, recording, "R1", RunKind.MAINTENANCE, now - timedelta(days=1))
+    repaired = fleet.upload("R1", RunKind.MAINTENANCE, timedelta(days=1))
     documents[repaired] = result_document(
         REPAIRED,
         metric=(0.0203, 0.0014),
@@ -252,14 +287,18 @@ def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[st
         drift_from=TRUE_EXTRINSICS,
         drift_run=eol,
     )
-    for run_id, document in documents.items():
-        store_report_images(storage, run_id, images)
-        with db.transaction() as session:
-            repository.store_result(session, run_id, document)
+    for run_id in (eol, hit, repaired):
+        store_report_images(fleet.storage, run_id, fleet.images)
+        with fleet.db.transaction() as session:
+            repository.store_result(session, run_id, documents[run_id])
             _took(session, run_id, seconds=sum(STAGES.values()))
+    return eol, hit, repaired
 
-    failed = _upload(db, storage, recording, "R2", RunKind.END_OF_LINE, now - timedelta(hours=3))
-    with db.transaction() as session:
+
+def _seed_failed(fleet: _Seeding) -> uuid.UUID:
+    """R2's run 3 h ago, failed: the recording has no stops."""
+    failed = fleet.upload("R2", RunKind.END_OF_LINE, timedelta(hours=3))
+    with fleet.db.transaction() as session:
         repository.fail_run(
             session,
             failed,
@@ -271,30 +310,21 @@ def seed_fleet(db: Database, storage: Storage, recording: bytes, images: dict[st
             },
         )
         _took(session, failed, seconds=0.4)
-    running = _upload(db, storage, recording, "R3", RunKind.END_OF_LINE, now - timedelta(minutes=2))
-    with db.transaction() as session:
+    return failed
+
+
+def _seed_running(fleet: _Seeding) -> uuid.UUID:
+    """R3's run uploaded 2 min ago, in its optimisation now."""
+    running = fleet.upload("R3", RunKind.END_OF_LINE, timedelta(minutes=2))
+    with fleet.db.transaction() as session:
         run = session.get(Run, running)
         assert run is not None
-        run.status, run.attempts, run.started_at = RunStatus.RUNNING, 1, now
+        run.status, run.attempts, run.started_at = RunStatus.RUNNING, 1, fleet.now
         run.stage, run.progress = "optimisation", 0.45
-    r4 = _seed_r4(db, storage, recording, images, now, documents)
-    undetermined = _upload(
-        db, storage, recording, "R5", RunKind.END_OF_LINE, now - timedelta(hours=5)
-    )
-    documents[undetermined] = undetermined_document()
-    with db.transaction() as session:
-        repository.store_result(session, undetermined, documents[undetermined])
-    return Fleet(eol, hit, repaired, failed, running, r4[:2], r4[2], undetermined, documents)
+    return running
 
 
-def _seed_r4(
-    db: Database,
-    storage: Storage,
-    recording: bytes,
-    images: dict[str, bytes],
-    now: datetime,
-    documents: dict[uuid.UUID, dict[str, Any]],
-) -> tuple[uuid.UUID, uuid.UUID, uuid.UUID]:
+def _seed_r4(fleet: _Seeding) -> tuple[uuid.UUID, uuid.UUID, uuid.UUID]:
     """Two accepted calibrations (3 and 2 days ago), then a diverged one 2 h ago."""
     ids = []
     for days_ago, calibrated, metric, kind in (
@@ -302,9 +332,9 @@ def _seed_r4(
         (2.0, REPAIRED, 0.0014, RunKind.MAINTENANCE),
         (2 / 24, DIVERGED, 0.052, RunKind.MAINTENANCE),
     ):
-        run_id = _upload(db, storage, recording, "R4", kind, now - timedelta(days=days_ago))
+        run_id = fleet.upload("R4", kind, timedelta(days=days_ago))
         diverged = calibrated is DIVERGED
-        documents[run_id] = result_document(
+        fleet.documents[run_id] = result_document(
             calibrated,
             metric=(0.031, metric),
             checks=pipeline_checks(
@@ -315,9 +345,9 @@ def _seed_r4(
                 undetermined=[],
             ),
         )
-        store_report_images(storage, run_id, images)
-        with db.transaction() as session:
-            repository.store_result(session, run_id, documents[run_id])
+        store_report_images(fleet.storage, run_id, fleet.images)
+        with fleet.db.transaction() as session:
+            repository.store_result(session, run_id, fleet.documents[run_id])
         ids.append(run_id)
     return ids[0], ids[1], ids[2]
 
