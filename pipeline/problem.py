@@ -73,6 +73,16 @@ class Stop:
     scan_counts: Mapping[str, int] = field(default_factory=dict)
     scan_sizes: Mapping[str, tuple[int, ...]] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        for frame, sizes in self.scan_sizes.items():
+            points = len(self.clouds.get(frame, ()))
+            if sizes and sum(sizes) != points:
+                raise ValueError(
+                    f"stop {self.index}: the scan sizes of {frame} add up to {sum(sizes)} points, "
+                    f"its cloud has {points}; a cloud filtered after reading needs its scan sizes "
+                    "counted again (or left out: its moving points are then not looked for)"
+                )
+
     @property
     def duration(self) -> float:
         return self.t_end - self.t_start

@@ -46,7 +46,8 @@ import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
 from pipeline.config import PipelineConfig  # noqa: E402
-from pipeline.problem import CalibrationProblem  # noqa: E402
+from pipeline.moving_points import scan_ids  # noqa: E402
+from pipeline.problem import CalibrationProblem, Stop  # noqa: E402
 from pipeline.synth.truth import Truth  # noqa: E402
 
 if TYPE_CHECKING:
@@ -156,14 +157,22 @@ def _history(
 
 
 def without_bleeding(problem: CalibrationProblem, truth: Truth) -> CalibrationProblem:
-    """`problem` with the points the synthesiser labelled as bleeding removed from every cloud."""
+    """`problem` with the points the synthesiser labelled as bleeding removed from every cloud
+    (and from the counts of points per scan)."""
+
+    def kept(stop: Stop, frame: str) -> NDArray[np.bool_]:
+        return ~truth.stop_labels(stop.index, frame).is_bleeding
+
+    def sizes(stop: Stop, frame: str) -> tuple[int, ...]:
+        scan = scan_ids(stop.scan_sizes[frame])
+        counts = np.bincount(scan[kept(stop, frame)], minlength=len(stop.scan_sizes[frame]))
+        return tuple(int(n) for n in counts)
+
     stops = tuple(
         dataclasses.replace(
             stop,
-            clouds={
-                frame: cloud[~truth.stop_labels(stop.index, frame).is_bleeding]
-                for frame, cloud in stop.clouds.items()
-            },
+            clouds={frame: cloud[kept(stop, frame)] for frame, cloud in stop.clouds.items()},
+            scan_sizes={frame: sizes(stop, frame) for frame in stop.scan_sizes},
         )
         for stop in problem.stops
     )

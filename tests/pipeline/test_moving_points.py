@@ -89,3 +89,10 @@ def test_scan_sizes_must_add_up_to_the_cloud() -> None:
 
 def test_scan_ids_number_points_by_their_scan() -> None:
     np.testing.assert_array_equal(scan_ids([2, 0, 3]), [0, 0, 2, 2, 2])
+
+
+def test_a_stop_whose_scan_sizes_do_not_add_up_is_refused_where_it_is_made() -> None:
+    from pipeline.problem import Stop
+
+    with pytest.raises(ValueError, match="scan sizes of lidar_front add up to 5 points"):
+        Stop(0, 0.0, 1.0, np.eye(4), {"lidar_front": np.zeros((4, 3))}, {}, {"lidar_front": (2, 3)})
