@@ -8,8 +8,7 @@ import json
 import math
 from typing import Any
 
-from pipeline.config import config_from_mapping
-from pipeline.errors import ConfigError
+from pipeline import ConfigError, config_from_mapping
 from service.problems import InvalidConfig
 
 HEADER = "X-Fleetcal-Config"

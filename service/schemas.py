@@ -19,7 +19,7 @@ from pydantic import (
     model_validator,
 )
 
-from pipeline.transforms import from_translation_xyzw
+from pipeline import from_translation_xyzw
 from service.models import DeliveryStatus, EventType, OverrideAction, RunKind, RunStatus
 from service.parameters import PlainText
 from service.problems import Problem

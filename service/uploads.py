@@ -19,7 +19,7 @@ import anyio
 from anyio import to_thread
 from starlette.requests import ClientDisconnect
 
-from pipeline.io.formats import HEAD_BYTES, RecordingFormat, detect_format_from_head
+from pipeline.io import HEAD_BYTES, RecordingFormat, detect_format_from_head
 from service.problems import (
     ChecksumMismatch,
     ClientDisconnected,

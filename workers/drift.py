@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pipeline.transforms import from_translation_xyzw, pose_difference
+from pipeline import from_translation_xyzw, pose_difference
 from workers.context import Reference
 
 # Check names follow `pipeline.verdict` (`<what>:<frame>`); "deviation" there already means the

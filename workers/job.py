@@ -16,13 +16,19 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-from pipeline.calibrate import STAGES, CalibrationResult, calibrate
-from pipeline.config import PipelineConfig, config_from_mapping
-from pipeline.errors import ConfigError, PipelineError
+from pipeline import (
+    STAGES,
+    CalibrationProblem,
+    CalibrationResult,
+    ConfigError,
+    PipelineConfig,
+    PipelineError,
+    calibrate_problem,
+    config_from_mapping,
+    render_report,
+    result_document,
+)
 from pipeline.io import read_recording
-from pipeline.problem import CalibrationProblem
-from pipeline.report import render_report
-from pipeline.result import result_document
 from service.reports import store_report_images
 from service.settings import Settings
 from service.storage import Storage, make_storage
@@ -155,7 +161,7 @@ def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
         read_seconds = time.perf_counter() - started
 
     stage(STAGES[0])
-    result = calibrate(problem, config, progress=after, on_iteration=iteration)
+    result = calibrate_problem(problem, config, progress=after, on_iteration=iteration)
     document = result_document(result, read_seconds=read_seconds)
     document["stages"] = {"download": {"seconds": download_seconds}, **document["stages"]}
     document["tolerance_profile"] = spec.context.profile

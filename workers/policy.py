@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from datetime import timedelta
 from typing import Any
 
-from pipeline.errors import BadInputError, ConfigError
+from pipeline import BadInputError, ConfigError
 from service.problems import problem_document
 from service.storage import StorageError
 

@@ -9,7 +9,7 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 from sqlalchemy.orm import Session
 
-from pipeline.transforms import from_translation_xyzw, pose_difference
+from pipeline import from_translation_xyzw, pose_difference
 from service import repository
 from service.deps import CurrentKey, RobotIdPath, SessionDep
 from service.models import Result

@@ -12,7 +12,7 @@ from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 from sqlalchemy.orm import Session
 
-from pipeline.report import REPORT_IMAGES
+from pipeline import REPORT_IMAGES
 from service import repository
 from service.auth import Principal
 from service.deps import CurrentKey, ServicesDep, SessionDep

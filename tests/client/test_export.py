@@ -12,7 +12,7 @@ import pytest
 import typer
 from typer.testing import CliRunner, Result
 
-from pipeline.cli import export as export_cli
+from client import export as export_cli
 from pipeline.io.writer import WriterFormat
 from pipeline.transforms import to_translation_xyzw
 from tests.pipeline.io.recordings import TRUE_EXTRINSICS, Spec, write_recording
