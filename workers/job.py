@@ -83,7 +83,8 @@ def optimisation_progress(iteration: int, max_iterations: int) -> float:
     start, end = _STAGE_PROGRESS["optimisation"], _STAGE_PROGRESS["metric"]
     if iteration >= max_iterations:
         return end
-    return start + (end - start) * (1 - 0.5 ** (iteration / ITERATION_HALF_LIFE))
+    left: float = 0.5 ** (iteration / ITERATION_HALF_LIFE)
+    return start + (end - start) * (1 - left)
 
 
 # The tolerance profile's limits that are the pipeline verdict's own (`VerdictConfig`); the drift

@@ -44,7 +44,7 @@ def test_invert_and_compose() -> None:
 
 
 def unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
+    return np.asarray(v / np.linalg.norm(v))
 
 
 def test_exp_log_round_trip_including_small_angles() -> None:

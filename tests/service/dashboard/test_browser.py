@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import httpx
 import pytest
@@ -21,7 +21,7 @@ def wait_for(browser: Any, css: str, count: int = 1) -> list[Any]:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
-    def found(driver: Any) -> list[Any] | bool:
+    def found(driver: Any) -> list[Any] | Literal[False]:
         elements = driver.find_elements(By.CSS_SELECTOR, css)
         return elements if len(elements) >= count else False
 

@@ -9,6 +9,7 @@ import typer
 from typer.testing import CliRunner, Result
 
 from client import export as export_cli
+from pipeline.export import ExportFormat
 from tests.pipeline.test_export import PARSERS, assert_recording_has, assert_same
 from tests.service.dashboard.conftest import LiveApp
 
@@ -30,7 +31,7 @@ def test_a_run_id_exports_its_result(live_app: LiveApp) -> None:
     result = export(live_app, str(run), "--format", "tf-static")
     assert result.exit_code == 0, result.output
     assert f"# source: run {run}" in result.stdout
-    assert_same(PARSERS["tf-static"](result.stdout), live_app.fleet.documents[run])
+    assert_same(PARSERS[ExportFormat.TF_STATIC](result.stdout), live_app.fleet.documents[run])
 
 
 def test_a_run_id_downloads_the_calibrated_recording(live_app: LiveApp, tmp_path: Path) -> None:
