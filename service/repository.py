@@ -367,7 +367,7 @@ def store_result(
 def fail_run(
     session: Session, run_id: uuid.UUID, problem: dict[str, Any], *, lease_owner: str | None = None
 ) -> Run:
-    """Mark the run `failed` with `problem`, an RFC 9457 document (`problems.problem_document`)."""
+    """Mark the run `failed` with `problem`, an RFC 9457 document (`problem_details`)."""
     run = _lock_run(session, run_id, lease_owner)
     _finish(run, RunStatus.FAILED, datetime.now(UTC), error=problem)
     outbox.enqueue_events(session, run, [(EventType.RUN_FAILED, {"error": problem})])

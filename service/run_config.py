@@ -9,7 +9,7 @@ import math
 from typing import Any
 
 from pipeline import ConfigError, config_from_mapping
-from service.problems import InvalidConfig
+from service.problem_details import InvalidConfig
 
 HEADER = "X-Fleetcal-Config"
 

@@ -22,7 +22,7 @@ from pydantic import (
 from pipeline import from_translation_xyzw
 from service.models import DeliveryStatus, EventType, OverrideAction, RunKind, RunStatus
 from service.parameters import PlainText
-from service.problems import Problem
+from service.problem_details import Problem
 
 ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"

@@ -16,7 +16,7 @@ from datetime import timedelta
 from typing import Any
 
 from pipeline import BadInputError, ConfigError
-from service.problems import problem_document
+from service.problem_details import problem_document
 from service.storage import StorageError
 
 

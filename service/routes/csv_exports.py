@@ -14,7 +14,7 @@ from fastapi.responses import Response
 from service import repository
 from service.deps import CurrentKey, ReadKey, RobotIdPath, SessionDep
 from service.parameters import FrameQuery, SinceQuery, UntilQuery
-from service.problems import PROBLEM_RESPONSES, Forbidden, RobotNotFound
+from service.problem_details import PROBLEM_RESPONSES, Forbidden, RobotNotFound
 
 router = APIRouter(tags=["exports"], responses=PROBLEM_RESPONSES)
 

@@ -27,7 +27,7 @@ from pipeline import (
 from service.auth import Principal
 from service.deps import CurrentKey, Services, ServicesDep
 from service.models import Result, Run, RunStatus
-from service.problems import PROBLEM_RESPONSES, ApiError
+from service.problem_details import PROBLEM_RESPONSES, ApiError
 from service.routes.reports import readable_run
 
 router = APIRouter(prefix="/v1/runs", tags=["exports"], responses=PROBLEM_RESPONSES)

@@ -22,7 +22,7 @@ from service.pagination import (
     encode_cursor,
 )
 from service.parameters import CursorQuery, FrameQuery, SinceQuery, UntilQuery
-from service.problems import (
+from service.problem_details import (
     PROBLEM_RESPONSES,
     Forbidden,
     NoCalibration,

@@ -23,7 +23,7 @@ from service.pagination import (
     encode_cursor,
 )
 from service.parameters import CursorQuery, SinceQuery, UntilQuery
-from service.problems import (
+from service.problem_details import (
     PROBLEM_RESPONSES,
     ApiError,
     Forbidden,
