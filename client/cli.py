@@ -1,5 +1,6 @@
-"""The client's commands of the `fleetcal` CLI: `upload`, `profiles list|show|set`,
-`runs list|show`, all against the API at --url with the key of --key or FLEETCAL_API_KEY."""
+"""The client's commands of the `fleetcal` CLI: `upload`, `export` (client/export.py),
+`profiles list|show|set`, `runs list|show`, all against the API at --url with the key of --key
+or FLEETCAL_API_KEY."""
 
 from __future__ import annotations
 
@@ -32,7 +33,10 @@ runs_app = typer.Typer(help="Runs: list (with filters), show.", no_args_is_help=
 
 
 def register(app: typer.Typer) -> None:
+    from client import export
+
     app.command("upload")(upload_command)
+    export.register(app)
     app.add_typer(profiles_app, name="profiles")
     app.add_typer(runs_app, name="runs")
 

@@ -22,7 +22,7 @@ from service.dashboard import router as dashboard_router
 from service.db import Database
 from service.deps import Services
 from service.metrics import Metrics, MetricsMiddleware
-from service.problems import MethodNotAllowed, install_problem_handlers, problem_response
+from service.problem_details import MethodNotAllowed, install_problem_handlers, problem_response
 from service.routes import (
     comparison,
     csv_exports,

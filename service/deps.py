@@ -15,7 +15,7 @@ from service.auth import Principal, authenticate
 from service.db import Database
 from service.metrics import Metrics
 from service.models import Scope
-from service.problems import Forbidden, NotReady, Unauthenticated
+from service.problem_details import Forbidden, NotReady, Unauthenticated
 from service.schemas import ROBOT_ID_PATTERN
 from service.settings import Settings
 from service.storage import Storage

@@ -79,25 +79,7 @@ def enqueue_events(
         if not subscribed:
             continue
         event_id = uuid.uuid4()
-        body = json.dumps(
-            {
-                "id": str(event_id),
-                "type": event.value,
-                "occurred_at": now.isoformat(),
-                "robot": {"id": run.robot_id, "model": model},
-                "run": {
-                    "id": str(run.id),
-                    "kind": run.kind.value,
-                    "status": run.status.value,
-                    "attempts": run.attempts,
-                    "url": f"/v1/runs/{run.id}",
-                },
-                "data": data,
-            },
-            sort_keys=True,
-            separators=(",", ":"),
-            allow_nan=False,
-        )
+        body = _event_body(event_id, event, data, run, model, now)
         for hook in subscribed:
             delivery = WebhookDelivery(
                 id=uuid.uuid4(),
@@ -117,3 +99,34 @@ def enqueue_events(
             session.add(delivery)
             deliveries.append(delivery)
     return deliveries
+
+
+def _event_body(
+    event_id: uuid.UUID,
+    event: EventType,
+    data: dict[str, Any],
+    run: Run,
+    model: str | None,
+    now: datetime,
+) -> str:
+    """The JSON every delivery of one event sends: compact, keys sorted (what the signature of
+    `workers.webhooks` covers byte for byte)."""
+    return json.dumps(
+        {
+            "id": str(event_id),
+            "type": event.value,
+            "occurred_at": now.isoformat(),
+            "robot": {"id": run.robot_id, "model": model},
+            "run": {
+                "id": str(run.id),
+                "kind": run.kind.value,
+                "status": run.status.value,
+                "attempts": run.attempts,
+                "url": f"/v1/runs/{run.id}",
+            },
+            "data": data,
+        },
+        sort_keys=True,
+        separators=(",", ":"),
+        allow_nan=False,
+    )

@@ -18,7 +18,7 @@ from datetime import datetime
 from typing import Any
 
 from service.parameters import in_utc
-from service.problems import InvalidCursor
+from service.problem_details import InvalidCursor
 from service.schemas import ROBOT_ID_PATTERN
 
 PAGE_SIZE_DEFAULT = 50

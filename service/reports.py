@@ -11,7 +11,7 @@ import uuid
 from collections.abc import Mapping
 from typing import BinaryIO
 
-from pipeline.report import REPORT_IMAGES
+from pipeline import REPORT_IMAGES
 from service.storage import Storage, validate_key
 
 REPORT_TITLES: Mapping[str, str] = {

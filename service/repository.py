@@ -19,7 +19,7 @@ from sqlalchemy import case, func, select, true, tuple_, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session, aliased
 
-from pipeline.result_model import ResultDocument
+from pipeline import ResultDocument
 from service import outbox
 from service.models import (
     EventType,
@@ -378,7 +378,7 @@ def _extrinsic_rows(run: Run, parsed: ResultDocument) -> list[LidarExtrinsic]:
 def fail_run(
     session: Session, run_id: uuid.UUID, problem: dict[str, Any], *, lease_owner: str | None = None
 ) -> Run:
-    """Mark the run `failed` with `problem`, an RFC 9457 document (`problems.problem_document`)."""
+    """Mark the run `failed` with `problem`, an RFC 9457 document (`problem_details`)."""
     run = _lock_run(session, run_id, lease_owner)
     _finish(run, RunStatus.FAILED, datetime.now(UTC), error=problem)
     outbox.enqueue_events(session, run, [(EventType.RUN_FAILED, {"error": problem})])

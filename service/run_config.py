@@ -8,9 +8,8 @@ import json
 import math
 from typing import Any
 
-from pipeline.config import config_from_mapping
-from pipeline.errors import ConfigError
-from service.problems import InvalidConfig
+from pipeline import ConfigError, config_from_mapping
+from service.problem_details import InvalidConfig
 
 HEADER = "X-Fleetcal-Config"
 

@@ -21,11 +21,10 @@ from pydantic import (
     model_validator,
 )
 
-from pipeline.result_model import ResultDocument, rpy_deg
-from pipeline.transforms import from_translation_xyzw
+from pipeline import ResultDocument, from_translation_xyzw, rpy_deg
 from service.models import DeliveryStatus, EventType, OverrideAction, RunKind, RunStatus, Scope
 from service.parameters import PlainText
-from service.problems import Problem
+from service.problem_details import Problem
 
 ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from service.problems import PROBLEM_MEDIA_TYPE, problem_document
+from service.problem_details import PROBLEM_MEDIA_TYPE, problem_document
 
 MAX_HEAD_BYTES = 1024 * 1024
 """A request's line and headers together; counted per received chunk, so one chunk (asyncio reads

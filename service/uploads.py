@@ -4,7 +4,7 @@ The body is never held whole: chunks gather into blocks of about `BLOCK_BYTES`, 
 hashed and written in a worker thread (hashlib and file writes release the GIL) while the event
 loop receives the next one, so at most two blocks are held at a time. On any failure, disconnect
 included, the pending object is aborted: nothing partial survives. Storage errors propagate as
-`StorageError`; `service.problems` maps them (503, or 507 when full).
+`StorageError`; `service.problem_details` maps them (503, or 507 when full).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import anyio
 from anyio import to_thread
 from starlette.requests import ClientDisconnect
 
-from pipeline.io.formats import HEAD_BYTES, RecordingFormat, detect_format_from_head
-from service.problems import (
+from pipeline.io import HEAD_BYTES, RecordingFormat, detect_format_from_head
+from service.problem_details import (
     ChecksumMismatch,
     ClientDisconnected,
     ContentLengthMismatch,

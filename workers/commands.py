@@ -3,23 +3,14 @@ workers), `demo` (the main job end to end on a fresh machine). Heavy imports sta
 
 from __future__ import annotations
 
-import contextlib
-import logging
 import os
-import shlex
-import signal
 import threading
-from collections.abc import Callable, Iterator
 from datetime import timedelta
-from types import FrameType
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
 import typer
 
 from service.cli import DataDirOption, settings_for, startup_errors
-
-if TYPE_CHECKING:
-    from service.settings import Settings
 
 DEFAULT_GRACE_S = 30.0
 DEFAULT_RUN_TIMEOUT_S = 3600.0
@@ -38,10 +29,10 @@ LogLevelOption = Annotated[str, typer.Option("--log-level", help="debug, info, w
 
 def register(app: typer.Typer) -> None:
     """Add `worker`, `serve` and `demo` to the root `fleetcal` app."""
-    app.command("worker")(worker)
-    app.command("serve")(serve)
     from workers.demo import demo
 
+    app.command("worker")(worker)
+    app.command("serve")(serve)
     app.command("demo")(demo)
 
 
@@ -81,6 +72,7 @@ def worker(
     FLEETCAL_STORAGE_URL; run any number of workers on any number of machines.
     """
     from service.startup import open_database, open_storage
+    from workers.process import configure_logging, stop_signals
     from workers.worker import CALIBRATE_JOB, Worker, WorkerOptions
 
     configure_logging(log_level)
@@ -124,7 +116,9 @@ def serve(
     prints an admin key, once.
     """
     from service.startup import shown_database
+    from workers.admin_key import print_first_admin_key
     from workers.embedded import EmbeddedService, first_admin_key
+    from workers.process import configure_logging, stop_signals
     from workers.worker import WorkerOptions
 
     configure_logging(log_level)
@@ -146,57 +140,3 @@ def serve(
         print_first_admin_key(first_admin_key(settings), settings)
         stop.wait()
         typer.echo("stopping: running runs finish or go back to the queue")
-
-
-def print_first_admin_key(secret: str | None, settings: Settings) -> None:
-    """Show the admin key a first start created (None: keys existed), with how to make more."""
-    if secret is None:
-        return
-    typer.echo("Created the first admin key; it is shown only this once, store it now:")
-    typer.echo(f"  {secret}")
-    typer.echo(
-        f"Make keys for robots and dashboards with it, or with `{keys_create_hint(settings)}`."
-    )
-
-
-def keys_create_hint(settings: Settings, scope: str = "read") -> str:
-    return f"fleetcal keys create --scope {scope} {data_dir_flag(settings)}".rstrip()
-
-
-def data_dir_flag(settings: Settings) -> str:
-    """`--data-dir DIR` for the hints this process prints: the directory it uses (nothing when
-    `FLEETCAL_DATABASE_URL` names the database: the commands read it from there too)."""
-    if settings.database_url is not None:
-        return ""
-    return f"--data-dir {shlex.quote(str(settings.data_dir))}"
-
-
-def configure_logging(level: str) -> None:
-    logging.basicConfig(
-        level=level.upper(),
-        format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
-    )
-
-
-@contextlib.contextmanager
-def stop_signals(request_stop: Callable[..., None]) -> Iterator[None]:
-    """While inside: SIGTERM and SIGINT call `request_stop()`, a second one
-    `request_stop(now=True)`; the previous handlers come back on leaving."""
-    received = [0]
-
-    def handle(signum: int, frame: FrameType | None) -> None:
-        received[0] += 1
-        now = received[0] > 1
-        logging.getLogger(__name__).warning(
-            "%s: %s",
-            signal.Signals(signum).name,
-            "stopping now" if now else "stopping after the running runs",
-        )
-        request_stop(now=now)
-
-    saved = {signum: signal.signal(signum, handle) for signum in (signal.SIGTERM, signal.SIGINT)}
-    try:
-        yield
-    finally:
-        for signum, handler in saved.items():
-            signal.signal(signum, handler)

@@ -22,7 +22,7 @@ from service.cli import DataDirOption, settings_for, startup_errors
 if TYPE_CHECKING:
     import httpx
 
-    from pipeline.synth import Truth
+    from pipeline import Truth
     from service.settings import Settings
 
 ROBOT_ID = "demo-1"
@@ -54,8 +54,9 @@ def demo(
 ) -> None:
     """Run the main job end to end: embedded service, synthetic recording, upload, verdict."""
     from service.startup import where_state_lives  # pydantic: not for every `fleetcal` start
-    from workers.commands import configure_logging, print_first_admin_key, stop_signals
+    from workers.admin_key import print_first_admin_key
     from workers.embedded import EmbeddedService, first_admin_key
+    from workers.process import configure_logging, stop_signals
 
     started = time.monotonic()
     configure_logging("warning")
@@ -107,14 +108,13 @@ def _step(number: int, text: str) -> None:
 
 
 def _synthesise(scratch: Path, scenario: str, seed: int, rate_scale: float) -> tuple[Truth, Path]:
-    from pipeline.synth import get_scenario
-    from pipeline.synth.recording import archive_recording, write_recording
+    from pipeline import archive_recording, get_scenario, synthesise_recording
 
     spec = get_scenario(scenario)
     _step(2, f"synthesise {scenario}: {spec.description} ({rate_scale:.0%} of the point rate)")
     started = time.monotonic()
     out = scratch / "synth"
-    truth = write_recording(spec, out, seed=seed, rate_scale=rate_scale)
+    truth = synthesise_recording(spec, out, seed=seed, rate_scale=rate_scale)
     archive = archive_recording(out, scratch / "recording.tar")
     size = archive.stat().st_size / 1e6
     typer.echo(f"          {time.monotonic() - started:.1f} s, {size:.1f} MB bag (tar)")
@@ -206,7 +206,7 @@ def extrinsics_table(result: dict[str, Any], truth: Truth) -> list[str]:
     import numpy as np
     from scipy.spatial.transform import Rotation
 
-    from pipeline.transforms import from_translation_xyzw, invert, pose_difference
+    from pipeline import from_translation_xyzw, invert, pose_difference
 
     def pose(entry: dict[str, Any]) -> np.ndarray:
         return from_translation_xyzw(entry["translation"], entry["rotation_xyzw"])
@@ -248,7 +248,7 @@ def extrinsics_table(result: dict[str, Any], truth: Truth) -> list[str]:
 
 
 def _serve_on(url: str, run_id: str, robot_key: str, settings: Settings) -> None:
-    from workers.commands import keys_create_hint
+    from workers.admin_key import keys_create_hint
 
     typer.echo("")
     typer.echo(f"The service keeps running at {url} (API docs: {url}/docs); Ctrl-C stops it.")

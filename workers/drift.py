@@ -11,9 +11,14 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Literal
 
-from pipeline.calibrate import CalibrationResult
-from pipeline.transforms import from_translation_xyzw, pose_difference, to_translation_xyzw
-from pipeline.verdict import DriftEvidence, with_drift
+from pipeline import (
+    CalibrationResult,
+    DriftEvidence,
+    from_translation_xyzw,
+    pose_difference,
+    to_translation_xyzw,
+    with_drift,
+)
 from workers.context import Reference
 
 _AGAINST: dict[str, Literal["last_accepted", "design"]] = {

@@ -16,13 +16,20 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-from pipeline.calibrate import STAGES, CalibrationResult, calibrate
-from pipeline.config import PipelineConfig, config_from_mapping
-from pipeline.errors import ConfigError, PipelineError
+from pipeline import (
+    STAGES,
+    CalibrationProblem,
+    CalibrationResult,
+    ConfigError,
+    PipelineConfig,
+    PipelineError,
+    calibrate_problem,
+    config_from_mapping,
+    load_renderer,
+    render_report,
+    result_document,
+)
 from pipeline.io import read_recording
-from pipeline.problem import CalibrationProblem
-from pipeline.report import load_renderer, render_report
-from pipeline.result import result_document
 from service.reports import store_report_images
 from service.settings import Settings
 from service.storage import Storage, make_storage
@@ -81,7 +88,8 @@ def optimisation_progress(iteration: int, max_iterations: int) -> float:
     start, end = _STAGE_PROGRESS["optimisation"], _STAGE_PROGRESS["metric"]
     if iteration >= max_iterations:
         return end
-    return start + (end - start) * (1 - 0.5 ** (iteration / ITERATION_HALF_LIFE))
+    left: float = 0.5 ** (iteration / ITERATION_HALF_LIFE)
+    return start + (end - start) * (1 - left)
 
 
 # The tolerance profile's limits that are the pipeline verdict's own (`VerdictConfig`); the drift
@@ -159,7 +167,7 @@ def calibrate_run(spec: JobSpec, report: Report) -> dict[str, Any]:
         read_seconds = time.perf_counter() - started
 
     stage(STAGES[0])
-    result = calibrate(problem, config, progress=after, on_iteration=iteration)
+    result = calibrate_problem(problem, config, progress=after, on_iteration=iteration)
     if spec.context.reference is not None:
         stage("drift")
         result = drift.judged_against(result, spec.context.reference)

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from datetime import timedelta
 from typing import Any
 
-from pipeline.errors import BadInputError, ConfigError
-from service.problems import problem_document
+from pipeline import BadInputError, ConfigError
+from service.problem_details import problem_document
 from service.storage import StorageError
 
 

@@ -64,7 +64,7 @@ class DeliveryOptions:
         )
 
     def backoff(self, attempts: int) -> timedelta:
-        return min(self.backoff_base * 2 ** max(attempts - 1, 0), self.backoff_max)
+        return min(self.backoff_base * (1 << max(attempts - 1, 0)), self.backoff_max)
 
 
 @dataclass(frozen=True)

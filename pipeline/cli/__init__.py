@@ -1,4 +1,5 @@
-"""The pipeline's commands of the `fleetcal` CLI (inspect, synth, denoise, calibrate, ...).
+"""The pipeline's commands of the `fleetcal` CLI (inspect, synth, denoise, calibrate, ...);
+`fleetcal export` is the client's (client/export.py), since it also fetches runs over HTTP.
 
 Each command lives in its own module with a `register(app)` function; heavy modules (open3d,
 mujoco, rosbags) are imported inside the command so that `fleetcal --help` stays instant.
@@ -14,7 +15,6 @@ _COMMAND_MODULES: tuple[str, ...] = (
     "inspect",
     "denoise",
     "synth",
-    "export",
     "export_map",
     "calibrate",
 )

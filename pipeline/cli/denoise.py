@@ -29,6 +29,7 @@ class Method(enum.StrEnum):
     FLOORED = "floored"
     SOR = "sor"
     DSOR = "dsor"
+    RANGE_GAP = "range_gap"
 
 
 DEFAULT_METHOD = Method.PATTERN

@@ -30,13 +30,13 @@ def export_map_command(
 ) -> None:
     """Write the map before and after calibration as PLY or PCD, for CloudCompare, RViz or
     Foxglove."""
-    from pipeline.cli.export import _load
+    from pipeline.cli.export import load_result
     from pipeline.config import PipelineConfig
     from pipeline.io import read_recording
     from pipeline.map_export import maps_before_after, write_map
 
     with user_errors():
-        document, _ = _load(result)
+        document, _ = load_result(result)
         config = PipelineConfig.model_validate(document.get("config") or {})
         problem = read_recording(recording, config.reader)
         before, after = maps_before_after(

@@ -3,6 +3,8 @@ bag) with the mcap library: rosbags reads only the `ros2` profile.
 
 `Ros1McapReader` offers what `source.OpenRecording` uses of rosbags' readers (connections, times,
 counts, raw messages in log-time order); messages are then decoded with the ROS 1 type store.
+Each call into mcap (and rosbags' type system) is a `library_call`: what they raise on damaged
+bytes is damage, what this module's own code raises is a bug.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.msg import normalize_msgtype
 
 from pipeline.io.errors import CorruptRecordingError
+from pipeline.io.library_calls import guarded, library_call
 from pipeline.io.typestores import ros1_typestore
 
 ROS1_ENCODING = "ros1"
@@ -43,7 +46,8 @@ class Ros1McapReader:
     def open(self) -> None:
         self._stream = self.path.open("rb")
         reader = self._reader()
-        summary = reader.get_summary()
+        with library_call():
+            summary = reader.get_summary()
         if summary is not None and summary.statistics is not None:
             schemas, channels = summary.schemas, summary.channels
             counts = dict(summary.statistics.channel_message_counts)
@@ -53,7 +57,8 @@ class Ros1McapReader:
         else:
             # No summary section (a recording cut short): one linear pass finds what it holds.
             schemas, channels, counts = {}, {}, {}
-            for schema, channel, message in self._reader().iter_messages(log_time_order=False):
+            everything = self._reader().iter_messages(log_time_order=False)
+            for schema, channel, message in guarded(everything):
                 if schema is not None:
                     schemas[schema.id] = schema
                 channels[channel.id] = channel
@@ -88,18 +93,20 @@ class Ros1McapReader:
         if not wanted:
             return
         topics = sorted({self._by_channel[i].topic for i in wanted})
-        for _, channel, message in self._reader().iter_messages(topics=topics):
+        for _, channel, message in guarded(self._reader().iter_messages(topics=topics)):
             if channel.id in wanted:
                 yield self._by_channel[channel.id], message.log_time, message.data
 
     def _reader(self) -> McapReader:
         assert self._stream is not None, "Ros1McapReader used before open()"
         self._stream.seek(0)
-        return make_reader(self._stream)
+        with library_call():
+            return make_reader(self._stream)
 
 
 def _connection(channel: Channel, schema: Schema, count: int, owner: Any) -> Connection:
-    msgtype = normalize_msgtype(schema.name)
+    with library_call():
+        msgtype = normalize_msgtype(schema.name)
     definition = schema.data.decode()
     return Connection(
         id=channel.id,
@@ -119,7 +126,8 @@ def _connection(channel: Channel, schema: Schema, count: int, owner: Any) -> Con
 def _md5sum(msgtype: str, definition: str) -> str:
     """The ROS 1 md5sum of the type (a ROS 1 bag stores it; the ros1 profile does not)."""
     store = ros1_typestore()
-    if msgtype not in store.types:
-        store = get_typestore(Stores.EMPTY)
-        store.register(get_types_from_msg(definition, msgtype))
-    return store.generate_msgdef(msgtype, ros_version=1)[1]
+    with library_call():
+        if msgtype not in store.types:
+            store = get_typestore(Stores.EMPTY)
+            store.register(get_types_from_msg(definition, msgtype))
+        return store.generate_msgdef(msgtype, ros_version=1)[1]

@@ -122,44 +122,84 @@ def summarize_recording(
     of `read_recording` except the one for missing extrinsics.
     """
     config = config or ReaderConfig()
-    base_frame = normalize_frame(config.base_frame)
     with open_recording(
         Path(path), limits=config.archive, scratch_dir=config.scratch_dir
     ) as opened:
-        topics, topic_notes = _lidar_topics(opened, config.lidar_topics)
-        motion = read_motion(
-            opened,
-            trajectory=config.trajectory,
-            odometry_topic=config.odometry_topic,
-            odom_frame=normalize_frame(config.odom_frame),
-            base_frame=base_frame,
-        )
-        clocks = probe_lidar_clocks(
-            opened, topics, motion.clock, tolerance_ns=round(config.clock_tolerance_s * NS)
-        )
-        stops = _stops(opened, motion, clocks, config)
-        clouds, lidar_stats, radars = _read_clouds(
-            opened, topics, stops, clocks, motion, config, keep_points
-        )
-        t_start, t_end, count = opened.start_time, opened.end_time, opened.message_count
+        reading = _read(opened, config, keep_points)
+    summary = _summary(str(path), reading, config)
+    require_stop_points(summary)
+    return summary
+
+
+@dataclass(frozen=True)
+class _Reading:
+    """What the passes over one open recording found, before it is summarised."""
+
+    opened: OpenRecording
+    motion: Motion
+    clocks: dict[str, LidarClock]
+    stops: tuple[StopSpan, ...]
+    clouds: StopClouds
+    lidar_stats: dict[str, _TopicStats]
+    topic_notes: list[str]
+    t_start_ns: int
+    t_end_ns: int
+    message_count: int
+
+
+def _read(opened: OpenRecording, config: ReaderConfig, keep_points: bool) -> _Reading:
+    """The trajectory, the LiDARs' clocks, the stops, then the stop clouds (the second pass)."""
+    topics, topic_notes = _lidar_topics(opened, config.lidar_topics)
+    motion = read_motion(
+        opened,
+        trajectory=config.trajectory,
+        odometry_topic=config.odometry_topic,
+        odom_frame=normalize_frame(config.odom_frame),
+        base_frame=normalize_frame(config.base_frame),
+    )
+    clocks = probe_lidar_clocks(
+        opened, topics, motion.clock, tolerance_ns=round(config.clock_tolerance_s * NS)
+    )
+    stops = _stops(opened, motion, clocks, config)
+    clouds, lidar_stats, radars = _read_clouds(
+        opened, topics, stops, clocks, motion, config, keep_points
+    )
     topic_notes += [
         f"{topic} left out: its fields {', '.join(fields)} are a radar's, not a LiDAR's; "
         "to read it as a LiDAR, list the LiDAR topics in reader.lidar_topics"
         for topic, fields in radars.items()
     ]
-    lidars, notes = _lidars(opened, lidar_stats, clouds, clocks, motion, config, topic_notes)
+    return _Reading(
+        opened,
+        motion,
+        clocks,
+        stops,
+        clouds,
+        lidar_stats,
+        topic_notes,
+        opened.start_time,
+        opened.end_time,
+        opened.message_count,
+    )
+
+
+def _summary(path: str, reading: _Reading, config: ReaderConfig) -> RecordingSummary:
+    opened, motion, clocks, clouds = reading.opened, reading.motion, reading.clocks, reading.clouds
+    lidars, notes = _lidars(
+        opened, reading.lidar_stats, clouds, clocks, motion, config, reading.topic_notes
+    )
     to_log = motion.clock.offset_ns  # stops are reported on the log clock
-    summary = RecordingSummary(
-        path=str(path),
+    return RecordingSummary(
+        path=path,
         format=opened.format.value,
         storage=opened.storage.value,
-        t_start_ns=t_start,
-        t_end_ns=t_end,
-        message_count=count,
+        t_start_ns=reading.t_start_ns,
+        t_end_ns=reading.t_end_ns,
+        message_count=reading.message_count,
         trajectory_source=motion.trajectory.source,
         trajectory_clock_offset_ns=to_log,
         odom_frame=motion.odom_frame,
-        base_frame=base_frame,
+        base_frame=normalize_frame(config.base_frame),
         lidars=lidars,
         stops=tuple(
             StopSummary(
@@ -169,17 +209,15 @@ def summarize_recording(
                 stop.T_odom_base,
                 MappingProxyType(clouds.closed[k]),
             )
-            for k, stop in enumerate(stops)
+            for k, stop in enumerate(reading.stops)
         ),
         notes=(
-            *topic_notes,
+            *reading.topic_notes,
             *motion.notes,
             *clock_notes(motion.trajectory.source, motion.clock, clocks.values()),
             *notes,
         ),
     )
-    require_stop_points(summary)
-    return summary
 
 
 @dataclass

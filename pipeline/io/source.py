@@ -38,6 +38,7 @@ from pipeline.io.formats import (
     detect_format,
     mcap_profile,
 )
+from pipeline.io.library_calls import LIBRARY_ERRORS, LibraryError, guarded, library_call
 from pipeline.io.mcap_ros1 import Ros1McapReader
 from pipeline.io.typestores import ros1_typestore, ros2_typestore
 
@@ -48,7 +49,9 @@ _SUFFIX = {
     RecordingFormat.ROS1: ".bag",
 }
 
-# What rosbags and its back-ends raise on a damaged or truncated file.
+# What rosbags and its back-ends raise on a damaged or truncated file: damage wherever raised.
+# (Plain errors such as ValueError count as damage only from inside a library call: see
+# `library_calls`.)
 READ_ERRORS: tuple[type[BaseException], ...] = (
     rosbag1.ReaderError,
     rosbag2.ReaderError,
@@ -63,30 +66,65 @@ READ_ERRORS: tuple[type[BaseException], ...] = (
     McapError,  # the mcap library (ros1-profile MCAP)
     zstandard.ZstdError,
 )
-# Damaged bytes also reach paths rosbags does not guard: its consistency asserts, a length field
-# asking for an absurd read (MemoryError, OverflowError), lookups of ids that do not exist. These
-# count as damage only when rosbags itself raised them; from our own code they stay bugs.
-_BACKEND_ERRORS: tuple[type[BaseException], ...] = (
-    AssertionError,
-    MemoryError,
-    OverflowError,
-    ValueError,
-    IndexError,
-    KeyError,
-)
-_TRANSLATED = READ_ERRORS + _BACKEND_ERRORS
-_BACKENDS = {"rosbags", "mcap"}
+
+
+class RosbagsReader:
+    """rosbags' reader of one bag file or directory, every call made as a `library_call`: the
+    counterpart of `Ros1McapReader`, which guards its own calls into mcap."""
+
+    def __init__(self, bag: Path, storage: RecordingFormat) -> None:
+        with library_call():
+            self._reader = (
+                rosbag1.Reader(bag) if storage is RecordingFormat.ROS1 else rosbag2.Reader(bag)
+            )
+
+    def open(self) -> None:
+        with library_call():
+            self._reader.open()
+
+    def close(self) -> None:
+        with library_call():
+            self._reader.close()
+
+    @property
+    def connections(self) -> list[Connection]:
+        with library_call():
+            return list(self._reader.connections)
+
+    @property
+    def start_time(self) -> int:
+        with library_call():
+            return self._reader.start_time
+
+    @property
+    def end_time(self) -> int:
+        with library_call():
+            return self._reader.end_time
+
+    @property
+    def message_count(self) -> int:
+        with library_call():
+            return self._reader.message_count
+
+    def messages(
+        self, connections: Sequence[Connection]
+    ) -> Iterator[tuple[Connection, int, bytes]]:
+        """`(connection, log time ns, raw bytes)` of those connections, in log-time order."""
+        with library_call():
+            messages = self._reader.messages(connections=connections)
+        return guarded(iter(messages))
 
 
 class OpenRecording:
-    """An open recording: the path given, its format, its storage, and its messages."""
+    """An open recording: the path given, its format, its storage, and its messages. What it
+    raises about the recording is already a `RecordingError` naming `path`."""
 
     def __init__(
         self,
         path: Path,
         fmt: RecordingFormat,
         storage: RecordingFormat,
-        readers: Sequence[rosbag1.Reader | rosbag2.Reader | Ros1McapReader],
+        readers: Sequence[RosbagsReader | Ros1McapReader],
     ) -> None:
         self.path, self.format, self.storage = path, fmt, storage
         self._readers = readers
@@ -95,63 +133,79 @@ class OpenRecording:
 
     @property
     def connections(self) -> list[Connection]:
-        return [c for reader in self._readers for c in reader.connections]
+        with reading_errors(self.path, self.storage):
+            return [c for reader in self._readers for c in reader.connections]
 
     @property
     def start_time(self) -> int:
-        return min(reader.start_time for reader in self._readers)
+        with reading_errors(self.path, self.storage):
+            return min(reader.start_time for reader in self._readers)
 
     @property
     def end_time(self) -> int:
-        return max(reader.end_time for reader in self._readers)
+        with reading_errors(self.path, self.storage):
+            return max(reader.end_time for reader in self._readers)
 
     @property
     def message_count(self) -> int:
-        return sum(reader.message_count for reader in self._readers)
+        with reading_errors(self.path, self.storage):
+            return sum(reader.message_count for reader in self._readers)
 
     def messages(
         self, connections: Iterable[Connection]
     ) -> Iterator[tuple[Connection, int, bytes]]:
         """`(connection, log time ns, raw bytes)` of those connections, in log-time order."""
         wanted = set(map(id, connections))
-        streams = []
-        for reader in self._readers:
-            mine = [c for c in reader.connections if id(c) in wanted]
-            if mine:
-                streams.append(reader.messages(connections=mine))
-        yield from heapq.merge(*streams, key=lambda message: message[1])
+        with reading_errors(self.path, self.storage):
+            streams = []
+            for reader in self._readers:
+                mine = [c for c in reader.connections if id(c) in wanted]
+                if mine:
+                    streams.append(reader.messages(connections=mine))
+            yield from heapq.merge(*streams, key=lambda message: message[1])
 
     def deserialize(self, raw: bytes, connection: Connection) -> Any:
         """Decode one message; standard types with our process-wide type store."""
         msgtype = connection.msgtype
         store = self._store
-        if msgtype not in store.types:
-            # e.g. ROS 1 `tf/tfMessage`: built once from the definition the recording carries.
-            if msgtype not in self._other_types:
-                self._other_types[msgtype] = get_typestore(Stores.EMPTY)
-                self._other_types[msgtype].register(
-                    get_types_from_msg(connection.msgdef.data, msgtype)
-                )
-            store = self._other_types[msgtype]
-        if self.storage.holds_ros1_messages:
-            return store.deserialize_ros1(raw, msgtype)
-        return store.deserialize_cdr(raw, msgtype)
+        try:
+            if msgtype not in store.types:
+                store = self._other_types.get(msgtype) or self._store_for(connection)
+            if self.storage.holds_ros1_messages:
+                return store.deserialize_ros1(raw, msgtype)
+            return store.deserialize_cdr(raw, msgtype)
+        except LIBRARY_ERRORS as err:
+            raise _damaged(self.path, self.storage, err) from err
+
+    def _store_for(self, connection: Connection) -> Typestore:
+        """A type store for a type ours lacks (e.g. ROS 1 `tf/tfMessage`), built once from the
+        definition the recording carries."""
+        store = get_typestore(Stores.EMPTY)
+        store.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+        self._other_types[connection.msgtype] = store
+        return store
 
 
 @contextmanager
 def reading_errors(path: Path, storage: RecordingFormat) -> Iterator[None]:
-    """Turn a back-end error while reading `path` into `CorruptRecordingError` with a remedy."""
+    """Turn an error of the libraries while reading `path` into `CorruptRecordingError` with a
+    remedy: their own error types (`READ_ERRORS`) wherever raised, plain Python errors only when
+    a library call raised them (`LibraryError`); the same plain errors from our code stay bugs."""
     try:
         yield
     except RecordingError:
         raise
-    except _TRANSLATED as err:
-        if not isinstance(err, READ_ERRORS) and not _raised_by_backend(err):
-            raise
-        raise CorruptRecordingError(
-            f"{path} looks like a {storage.value} recording but cannot be read ({_cause(err)}); "
-            f"it is truncated or damaged: {_remedy(storage)}"
-        ) from err
+    except LibraryError as err:
+        raise _damaged(path, storage, err.cause) from err.cause
+    except READ_ERRORS as err:
+        raise _damaged(path, storage, err) from err
+
+
+def _damaged(path: Path, storage: RecordingFormat, err: BaseException) -> CorruptRecordingError:
+    return CorruptRecordingError(
+        f"{path} looks like a {storage.value} recording but cannot be read ({_cause(err)}); "
+        f"it is truncated or damaged: {_remedy(storage)}"
+    )
 
 
 def _remedy(storage: RecordingFormat) -> str:
@@ -159,20 +213,6 @@ def _remedy(storage: RecordingFormat) -> str:
         RecordingFormat.ROS1: "run `rosbag reindex` on it, or copy it again",
         RecordingFormat.SQLITE3: "copy it again; a damaged sqlite3 bag cannot be repaired here",
     }.get(storage, "copy it again, or repair it with `ros2 bag reindex` / `mcap recover`")
-
-
-def _raised_by_backend(err: BaseException) -> bool:
-    """Whether `err` was raised while rosbags ran: a frame of its traceback is in rosbags, or its
-    innermost frame is code rosbags generated. (Not only the innermost frame: rosbags' own error
-    messages can fail in the standard library, e.g. an unknown record type's enum lookup.)"""
-    tb = err.__traceback__
-    innermost = ""
-    while tb is not None:
-        innermost = tb.tb_frame.f_code.co_filename
-        if _BACKENDS & set(Path(innermost).parts):
-            return True
-        tb = tb.tb_next
-    return bool(innermost) and not innermost.endswith(".py")
 
 
 @contextmanager
@@ -220,7 +260,7 @@ def open_recording(
             )
             paths = [_named_for_rosbags(f, storage, i, scratch_path) for i, f in enumerate(files)]
         with reading_errors(path, storage):
-            readers: list[rosbag1.Reader | rosbag2.Reader | Ros1McapReader] = []
+            readers: list[RosbagsReader | Ros1McapReader] = []
             for bag in paths:
                 reader = _reader(bag, storage)
                 reader.open()
@@ -237,14 +277,10 @@ def open_recording(
         yield OpenRecording(path, fmt, storage, readers)
 
 
-def _reader(
-    bag: Path, storage: RecordingFormat
-) -> rosbag1.Reader | rosbag2.Reader | Ros1McapReader:
-    if storage is RecordingFormat.ROS1:
-        return rosbag1.Reader(bag)
+def _reader(bag: Path, storage: RecordingFormat) -> RosbagsReader | Ros1McapReader:
     if storage is RecordingFormat.MCAP_ROS1:
         return Ros1McapReader(bag)
-    return rosbag2.Reader(bag)
+    return RosbagsReader(bag, storage)
 
 
 def _storage_format(path: Path, fmt: RecordingFormat) -> RecordingFormat:

@@ -11,7 +11,7 @@ from importlib import resources
 from fastapi import APIRouter
 from fastapi.responses import Response
 
-from service.problems import NotFound
+from service.problem_details import NotFound
 
 router = APIRouter(include_in_schema=False)
 

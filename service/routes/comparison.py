@@ -9,11 +9,11 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 from sqlalchemy.orm import Session
 
-from pipeline.transforms import from_translation_xyzw, pose_difference
+from pipeline import from_translation_xyzw, pose_difference
 from service import repository
 from service.deps import CurrentKey, RobotIdPath, SessionDep
 from service.models import Result
-from service.problems import PROBLEM_RESPONSES, Forbidden, RunNotFound
+from service.problem_details import PROBLEM_RESPONSES, Forbidden, RunNotFound
 from service.routes.exports import RunHasNoResultError
 from service.schemas import ComparedRun, LidarChange, RunComparison
 

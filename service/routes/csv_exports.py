@@ -6,7 +6,7 @@ from __future__ import annotations
 import csv
 import io
 from collections.abc import Iterable, Sequence
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
@@ -14,7 +14,7 @@ from fastapi.responses import Response
 from service import repository
 from service.deps import CurrentKey, ReadKey, RobotIdPath, SessionDep
 from service.parameters import FrameQuery, SinceQuery, UntilQuery
-from service.problems import PROBLEM_RESPONSES, Forbidden, RobotNotFound
+from service.problem_details import PROBLEM_RESPONSES, Forbidden, RobotNotFound
 
 router = APIRouter(tags=["exports"], responses=PROBLEM_RESPONSES)
 
@@ -40,7 +40,9 @@ FLEET_COLUMNS = (
     *POSE_COLUMNS,
 )
 _PAGE = 1000
-_CSV = {200: {"description": "CSV with a header row.", "content": {"text/csv": {}}}}
+_CSV: dict[int | str, dict[str, Any]] = {
+    200: {"description": "CSV with a header row.", "content": {"text/csv": {}}}
+}
 
 
 def _csv(header: Sequence[str], rows: Iterable[Sequence[object]], filename: str) -> Response:

@@ -15,19 +15,19 @@ from fastapi import APIRouter, Query
 from fastapi.responses import FileResponse, Response
 from starlette.background import BackgroundTask
 
-from pipeline.errors import PipelineError
-from pipeline.export import (
+from pipeline import (
     FILE_NAMES,
     MEDIA_TYPES,
     ExportError,
     ExportFormat,
+    PipelineError,
     calibrated_extrinsics,
     render,
 )
 from service.auth import Principal
 from service.deps import CurrentKey, Services, ServicesDep
 from service.models import Result, Run, RunStatus
-from service.problems import PROBLEM_RESPONSES, ApiError
+from service.problem_details import PROBLEM_RESPONSES, ApiError
 from service.routes.reports import readable_run
 
 router = APIRouter(prefix="/v1/runs", tags=["exports"], responses=PROBLEM_RESPONSES)
@@ -157,8 +157,7 @@ def _calibrated_recording(
     T_base_lidar: dict[str, Any],
     base_frame: str,
 ) -> Path:
-    from pipeline.io.config import ReaderConfig
-    from pipeline.io.retag import write_calibrated_recording
+    from pipeline.io import ReaderConfig, write_calibrated_recording
 
     upload = scratch / f"recording{_SUFFIXES.get(run.upload_format, '')}"
     services.storage.download(run.storage_key, upload)

@@ -21,7 +21,7 @@ from service.pagination import (
     decode_cursor,
     encode_cursor,
 )
-from service.problems import PROBLEM_RESPONSES
+from service.problem_details import PROBLEM_RESPONSES
 from service.routes.runs import run_summary
 from service.schemas import RobotPublic, RunSummary
 

@@ -9,7 +9,7 @@ from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from sqlalchemy import text
 
 from service.deps import Services, ServicesDep
-from service.problems import PROBLEM_RESPONSES, NotReady
+from service.problem_details import PROBLEM_RESPONSES, NotReady
 from service.schemas import Health, Readiness
 from service.storage import StorageError
 

@@ -7,7 +7,7 @@ from fastapi import APIRouter
 
 from service.deps import CurrentKey, SessionDep
 from service.models import ApiKey
-from service.problems import PROBLEM_RESPONSES
+from service.problem_details import PROBLEM_RESPONSES
 from service.schemas import KeyPublic
 
 router = APIRouter(prefix="/v1/keys", tags=["keys"], responses=PROBLEM_RESPONSES)

@@ -12,7 +12,7 @@ from sqlalchemy.orm import Session
 from service import overrides, repository
 from service.deps import OverrideKey, WriteSessionDep
 from service.models import OverrideAction
-from service.problems import PROBLEM_RESPONSES, OverrideConflict, RunNotFound
+from service.problem_details import PROBLEM_RESPONSES, OverrideConflict, RunNotFound
 from service.routes.exports import RunHasNoResultError
 from service.routes.runs import run_public
 from service.schemas import OverrideIn, RunPublic

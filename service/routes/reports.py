@@ -12,12 +12,12 @@ from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 from sqlalchemy.orm import Session
 
-from pipeline.report import REPORT_IMAGES
+from pipeline import REPORT_IMAGES
 from service import repository
 from service.auth import Principal
 from service.deps import CurrentKey, ServicesDep, SessionDep
 from service.models import Result, Run
-from service.problems import PROBLEM_RESPONSES, ApiError, Forbidden, RunNotFound
+from service.problem_details import PROBLEM_RESPONSES, ApiError, Forbidden, RunNotFound
 from service.reports import REPORT_TITLES, open_report_image, report_key, stored_report_images
 
 router = APIRouter(prefix="/v1/runs", tags=["reports"], responses=PROBLEM_RESPONSES)

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, Response
 from pydantic import TypeAdapter
 from sqlalchemy.orm import Session
 
-from pipeline.result_model import ResultDocument
+from pipeline import ResultDocument
 from service import repository
 from service.auth import Principal
 from service.deps import AdminKey, CurrentKey, ReadKey, RobotIdPath, SessionDep, WriteSessionDep
@@ -23,7 +23,7 @@ from service.pagination import (
     encode_cursor,
 )
 from service.parameters import CursorQuery, FrameQuery, SinceQuery, UntilQuery
-from service.problems import (
+from service.problem_details import (
     PROBLEM_RESPONSES,
     Forbidden,
     NoCalibration,

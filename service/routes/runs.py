@@ -11,7 +11,7 @@ from anyio import to_thread
 from fastapi import APIRouter, Header, Query, Request, Response
 from sqlalchemy.exc import IntegrityError
 
-from pipeline.result_model import ResultDocument
+from pipeline import ResultDocument
 from service import overrides, repository
 from service.deps import CurrentKey, ReadKey, RobotIdPath, Services, ServicesDep, SessionDep
 from service.models import Override, Result, Run, RunKind, RunStatus
@@ -24,7 +24,7 @@ from service.pagination import (
     encode_cursor,
 )
 from service.parameters import CursorQuery, SinceQuery, UntilQuery
-from service.problems import (
+from service.problem_details import (
     PROBLEM_RESPONSES,
     ApiError,
     Forbidden,
@@ -43,12 +43,40 @@ from service.schemas import (
     RunSummary,
     UploadInfo,
 )
-from service.uploads import stream_to_storage
+from service.uploads import StoredUpload, stream_to_storage
 
 router = APIRouter(prefix="/v1", tags=["runs"], responses=PROBLEM_RESPONSES)
 
 MAX_CONFIG_HEADER_CHARS = 16 * 1024
 
+IdempotencyKeyHeader = Annotated[
+    str | None,
+    Header(
+        alias="Idempotency-Key",
+        min_length=1,
+        max_length=255,
+        pattern=r"^[\x21-\x7e]+$",
+        description="Repeating it (for the same robot) returns the first run.",
+    ),
+]
+ContentSha256Header = Annotated[
+    str | None,
+    Header(
+        alias="X-Content-SHA256",
+        pattern=r"^[0-9a-fA-F]{64}$",
+        description="Hex SHA-256 of the body; a mismatch is refused (422).",
+    ),
+]
+RunConfigHeader = Annotated[
+    str | None,
+    Header(
+        alias="X-Fleetcal-Config",
+        max_length=MAX_CONFIG_HEADER_CHARS,
+        description="Calibration config as a JSON object (reference LiDAR, initial "
+        "extrinsics, ...): a `PipelineConfig` without `verdict`; an invalid one is refused "
+        "(422).",
+    ),
+]
 
 _UPLOAD_BODY = {
     "requestBody": {
@@ -81,34 +109,9 @@ async def upload_run(
     response: Response,
     principal: CurrentKey,
     services: ServicesDep,
-    idempotency_key: Annotated[
-        str | None,
-        Header(
-            alias="Idempotency-Key",
-            min_length=1,
-            max_length=255,
-            pattern=r"^[\x21-\x7e]+$",
-            description="Repeating it (for the same robot) returns the first run.",
-        ),
-    ] = None,
-    content_sha256: Annotated[
-        str | None,
-        Header(
-            alias="X-Content-SHA256",
-            pattern=r"^[0-9a-fA-F]{64}$",
-            description="Hex SHA-256 of the body; a mismatch is refused (422).",
-        ),
-    ] = None,
-    config: Annotated[
-        str | None,
-        Header(
-            alias="X-Fleetcal-Config",
-            max_length=MAX_CONFIG_HEADER_CHARS,
-            description="Calibration config as a JSON object (reference LiDAR, initial "
-            "extrinsics, ...): a `PipelineConfig` without `verdict`; an invalid one is refused "
-            "(422).",
-        ),
-    ] = None,
+    idempotency_key: IdempotencyKeyHeader = None,
+    content_sha256: ContentSha256Header = None,
+    config: RunConfigHeader = None,
 ) -> RunPublic:
     """Stream the body to storage (never whole in memory), check its size, SHA-256 and format,
     then record the run as `queued` in the same transaction as the upload."""
@@ -126,18 +129,7 @@ async def upload_run(
         await to_thread.run_sync(_require_robot, services, robot_id)
 
     run_id = uuid.uuid4()
-    try:
-        stored = await stream_to_storage(
-            request.stream(),
-            services.storage,
-            repository.recording_key(robot_id, run_id),
-            max_bytes=settings.max_upload_bytes,
-            declared_length=declared_length,
-            expected_sha256=content_sha256,
-        )
-    except ApiError as err:
-        services.metrics.uploads.labels(err.slug).inc()
-        raise
+    stored = await _store(request, services, robot_id, run_id, declared_length, content_sha256)
     upload = repository.NewUpload(
         run_id=run_id,
         robot_id=robot_id,
@@ -150,21 +142,56 @@ async def upload_run(
         config=parsed_config,
         max_attempts=settings.run_max_attempts,
     )
+    return await _record_or_replay(services, upload, content_sha256, response)
+
+
+async def _store(
+    request: Request,
+    services: Services,
+    robot_id: str,
+    run_id: uuid.UUID,
+    declared_length: int | None,
+    content_sha256: str | None,
+) -> StoredUpload:
+    """The body in storage under the run's key, once it passed every check (counted if not)."""
+    try:
+        return await stream_to_storage(
+            request.stream(),
+            services.storage,
+            repository.recording_key(robot_id, run_id),
+            max_bytes=services.settings.max_upload_bytes,
+            declared_length=declared_length,
+            expected_sha256=content_sha256,
+        )
+    except ApiError as err:
+        services.metrics.uploads.labels(err.slug).inc()
+        raise
+
+
+async def _record_or_replay(
+    services: Services,
+    upload: repository.NewUpload,
+    content_sha256: str | None,
+    response: Response,
+) -> RunPublic:
+    """Record the stored upload's run; if that fails, the stored recording is deleted again,
+    and a request with the same Idempotency-Key that won the race gets its run."""
     try:
         run = await to_thread.run_sync(_record, services, upload)
     except BaseException as err:
         with anyio.CancelScope(shield=True):
-            await to_thread.run_sync(services.storage.delete, stored.key)
-        if isinstance(err, IntegrityError) and idempotency_key is not None:
+            await to_thread.run_sync(services.storage.delete, upload.storage_key)
+        key = upload.idempotency_key
+        if isinstance(err, IntegrityError) and key is not None:
             # Another request with the same key won the race: answer with its run.
-            first = await to_thread.run_sync(_find_first_run, services, robot_id, idempotency_key)
+            first = await to_thread.run_sync(_find_first_run, services, upload.robot_id, key)
             if first is not None:
-                return _replay(first, kind, content_sha256, response, services)
+                return _replay(first, upload.kind, content_sha256, response, services)
         if isinstance(err, repository.UnknownRobotError):
-            raise RobotNotFound(f"robot {robot_id!r} is not registered") from err
+            raise RobotNotFound(f"robot {upload.robot_id!r} is not registered") from err
         raise
     services.metrics.uploads.labels("accepted").inc()
-    services.metrics.upload_bytes.inc(stored.size)
+    services.metrics.upload_bytes.inc(upload.size)
     response.headers["Location"] = f"/v1/runs/{run.id}"
     return run_public(run, None)
 

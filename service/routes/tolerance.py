@@ -9,7 +9,7 @@ from fastapi import APIRouter, Path, Response
 from service import repository
 from service.deps import AdminKey, ReadKey, SessionDep, WriteSessionDep
 from service.models import ToleranceProfile
-from service.problems import PROBLEM_RESPONSES, Conflict, ProfileNotFound
+from service.problem_details import PROBLEM_RESPONSES, Conflict, ProfileNotFound
 from service.schemas import (
     NAME_PATTERN,
     ToleranceProfileIn,

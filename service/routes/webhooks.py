@@ -21,7 +21,7 @@ from service.pagination import (
     encode_cursor,
 )
 from service.parameters import CursorQuery
-from service.problems import PROBLEM_RESPONSES, WebhookNotFound
+from service.problem_details import PROBLEM_RESPONSES, WebhookNotFound
 from service.schemas import (
     DeliveryPage,
     DeliveryPublic,

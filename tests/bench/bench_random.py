@@ -237,6 +237,11 @@ TABLE_HEADER = (
 )
 
 
+def class_part(index: int) -> Callable[[SeedResult], str]:
+    """The `index`-th part of a record's scenario class (routine/sensors/errors)."""
+    return lambda record: record.scenario_class.split("/")[index]
+
+
 def grouped_table(
     records: Iterable[SeedResult], key: Callable[[SeedResult], str], group: str
 ) -> str:
@@ -259,7 +264,7 @@ def report(records: Sequence[SeedResult], methods: Sequence[str]) -> str:
         out.append(grouped_table(mine, lambda r: r.scenario_class, "class"))
         for index, axis in enumerate(("routine", "sensors", "errors")):
             out.append(f"\n## {method}: per {axis}\n")
-            out.append(grouped_table(mine, lambda r, i=index: r.scenario_class.split("/")[i], axis))
+            out.append(grouped_table(mine, class_part(index), axis))
         out.append(f"\n## {method}: per header clock\n")
         out.append(grouped_table(mine, lambda r: r.clock, "clock"))
         out.append("")

@@ -88,7 +88,8 @@ def test_service_killed_mid_upload_and_restarted_ends_with_one_run(
 
     assert progress.killed.is_set() and progress.restarter is not None
     progress.restarter.join()
-    assert "retrying" in progress.stream.getvalue()  # type: ignore[attr-defined]
+    assert isinstance(progress.stream, io.StringIO)
+    assert "retrying" in progress.stream.getvalue()
     assert not sent.replayed
     assert [run["id"] for run in api_only.runs()] == [sent.run["id"]]
     assert sent.run["upload"]["sha256"] == payload.sha256

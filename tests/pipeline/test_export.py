@@ -110,17 +110,28 @@ def parse_launch(text: str) -> dict[tuple[str, str], np.ndarray]:
     return parsed
 
 
+def attribute(element: ET.Element | None, name: str) -> str:
+    """`name` of `element`, which must be there (a URDF that lacks it fails the test)."""
+    assert element is not None, f"no element for {name}"
+    value = element.get(name)
+    assert value is not None, f"no attribute {name}"
+    return value
+
+
 def parse_urdf(text: str) -> dict[tuple[str, str], np.ndarray]:
     robot = ET.fromstring(text)
-    links = {link.get("name") for link in robot.iter("link")}
+    links = {attribute(link, "name") for link in robot.iter("link")}
     parsed = {}
     for joint in robot.iter("joint"):
         assert joint.get("type") == "fixed"
-        parent, child = joint.find("parent").get("link"), joint.find("child").get("link")
+        parent, child = (
+            attribute(joint.find("parent"), "link"),
+            attribute(joint.find("child"), "link"),
+        )
         assert {parent, child} <= links
         origin = joint.find("origin")
-        xyz = [float(v) for v in origin.get("xyz").split()]
-        rpy = [float(v) for v in origin.get("rpy").split()]
+        xyz = [float(v) for v in attribute(origin, "xyz").split()]
+        rpy = [float(v) for v in attribute(origin, "rpy").split()]
         parsed[(parent, child)] = from_xyz_rpy(xyz, rpy)
     return parsed
 
@@ -212,7 +223,7 @@ def test_launch_file_names_valid_ros_nodes_and_says_what_it_is() -> None:
 
 def test_urdf_declares_every_link_once() -> None:
     robot = ET.fromstring(urdf_snippet(set1_document()))
-    names = [link.get("name") for link in robot.iter("link")]
+    names = [attribute(link, "name") for link in robot.iter("link")]
     assert sorted(names) == ["base_link", "lidar_front", "lidar_left", "lidar_rear"]
 
 

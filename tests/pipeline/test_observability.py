@@ -49,8 +49,7 @@ def test_the_jackknife_is_exact_leave_one_stop_out_on_a_linear_problem() -> None
     def solve(stops: list[int]) -> NDArray[np.float64]:
         A = np.vstack([rows[j] for j in stops] + [np.diag(np.sqrt(prior))])
         y = np.concatenate([targets[j] for j in stops] + [np.zeros(size)])
-        solution: NDArray[np.float64] = np.linalg.lstsq(A, y, rcond=None)[0]
-        return solution
+        return np.asarray(np.linalg.lstsq(A, y, rcond=None)[0], dtype=np.float64)
 
     everything = list(range(layout.n_stops))
     theta = solve(everything)

@@ -41,7 +41,7 @@ def test_a_quadric_follows_a_curved_surface_that_a_plane_flattens() -> None:
     curved, normals = local_planes(points, 30, quadric=True)
 
     def off_surface(p: np.ndarray) -> np.ndarray:
-        return np.abs(np.hypot(p[:, 0], p[:, 1]) - radius)
+        return np.asarray(np.abs(np.hypot(p[:, 0], p[:, 1]) - radius))
 
     # The plane through a patch's centroid lies inside the cylinder (half a millimetre here, where
     # points are 1.3 cm apart; more on sparse or voxelised clouds)...

@@ -91,12 +91,20 @@ def test_every_event_arrives_once_across_a_killed_worker_and_a_restarted_receive
     expected = _events(db)
     try:
         with processes() as workers:
-            workers.append(start_worker(settings, SCRIPTED, tmp_path / "w1.log", **FAST_WEBHOOKS))
+            workers.append(
+                start_worker(
+                    settings, SCRIPTED, tmp_path / "w1.log", concurrency=1, **FAST_WEBHOOKS
+                )
+            )
             wait_for("the third delivery to be in flight", hanging.is_set, WAIT_S)
             workers[0].kill()
             release.set()
             receiver.stop()  # the receiver goes down for a redeploy while a new worker starts
-            workers.append(start_worker(settings, SCRIPTED, tmp_path / "w2.log", **FAST_WEBHOOKS))
+            workers.append(
+                start_worker(
+                    settings, SCRIPTED, tmp_path / "w2.log", concurrency=1, **FAST_WEBHOOKS
+                )
+            )
 
             def refused_once() -> bool:
                 with db.session() as session:

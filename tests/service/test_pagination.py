@@ -18,7 +18,7 @@ from service.pagination import (
     decode_cursor,
     encode_cursor,
 )
-from service.problems import InvalidCursor
+from service.problem_details import InvalidCursor
 
 MEASURED = datetime(2026, 1, 2, 3, 4, 5, 678_000, tzinfo=UTC)
 RUN_ID = uuid.UUID("12345678-1234-4234-8234-123456789abc")

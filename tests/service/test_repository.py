@@ -18,7 +18,7 @@ from pipeline.result_model import result_schema
 from service import repository
 from service.db import Database
 from service.models import LidarExtrinsic, Result, Robot, Run, RunKind, RunStatus
-from service.problems import problem_document
+from service.problem_details import problem_document
 from service.settings import Settings
 from tests.service.documents import result_document
 from tests.service.uploads import new_upload

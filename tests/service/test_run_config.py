@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from service.problems import InvalidConfig
+from service.problem_details import InvalidConfig
 from service.run_config import parse_run_config
 
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
+import click
 import numpy as np
 import typer
 from typer.testing import CliRunner, Result
@@ -119,9 +121,8 @@ def test_option_choices_and_defaults_are_the_configs() -> None:
     # The CLI spells them out so that `fleetcal` starts without numpy and pydantic; they must
     # still say what `DenoiseConfig` does.
     config = DenoiseConfig()
-    options = {
-        param.name: param for param in typer.main.get_command(app).commands["denoise"].params
-    }
+    root = cast(click.Group, typer.main.get_command(app))  # `app` has sub-commands: a group
+    options = {param.name: param for param in root.commands["denoise"].params}
 
     assert [m.value for m in denoise_cli.Method] == [m.value for m in DenoiseMethod]
     assert [options[name].default for name in ("method", "k", "cs", "cr")] == [

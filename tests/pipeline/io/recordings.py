@@ -313,7 +313,7 @@ def write_organised_cloud(
         record[name] = values
     codes = {"u1": 2, "u2": 4, "i4": 5, "u4": 6, "f4": 7, "f8": 8}
     point_field = writer.types["sensor_msgs/msg/PointField"]
-    offsets: Mapping[str, tuple[Any, ...]] = record.dtype.fields or {}
+    offsets: dict[str, tuple[Any, ...]] = dict(record.dtype.fields or {})
     rows_bytes = record.view(np.uint8).reshape(rows, columns * record.dtype.itemsize)
     padded = np.concatenate([rows_bytes, np.zeros((rows, row_padding), np.uint8)], axis=1)
     types = writer.types
@@ -325,7 +325,7 @@ def write_organised_cloud(
         width=columns,
         fields=[
             point_field(name=name, offset=int(offset), datatype=codes[sub.str[1:]], count=1)
-            for name, (sub, offset, *_title) in offsets.items()
+            for name, (sub, offset, *_) in offsets.items()
         ],
         is_bigendian=False,
         point_step=record.dtype.itemsize,

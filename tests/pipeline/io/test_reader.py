@@ -445,14 +445,14 @@ def assert_same_problem(a: CalibrationProblem, b: CalibrationProblem) -> None:
         )
         assert x.T_base_lidar.tobytes() == y.T_base_lidar.tobytes()
     assert len(a.stops) == len(b.stops) == 3
-    for x, y in zip(a.stops, b.stops, strict=True):
-        assert (x.index, x.t_start, x.t_end) == (y.index, y.t_start, y.t_end)
-        assert dict(x.scan_counts) == dict(y.scan_counts) == {"lidar_front": 7, "lidar_rear": 7}
-        assert x.T_odom_base.tobytes() == y.T_odom_base.tobytes()
-        assert x.clouds.keys() == y.clouds.keys()
-        for frame, cloud in x.clouds.items():
-            assert cloud.dtype == y.clouds[frame].dtype
-            assert cloud.tobytes() == y.clouds[frame].tobytes()
+    for s, t in zip(a.stops, b.stops, strict=True):
+        assert (s.index, s.t_start, s.t_end) == (t.index, t.t_start, t.t_end)
+        assert dict(s.scan_counts) == dict(t.scan_counts) == {"lidar_front": 7, "lidar_rear": 7}
+        assert s.T_odom_base.tobytes() == t.T_odom_base.tobytes()
+        assert s.clouds.keys() == t.clouds.keys()
+        for frame, cloud in s.clouds.items():
+            assert cloud.dtype == t.clouds[frame].dtype
+            assert cloud.tobytes() == t.clouds[frame].tobytes()
     assert a.recording is not None and b.recording is not None
     assert (a.recording.format, a.recording.t_start, a.recording.t_end) == (
         b.recording.format,

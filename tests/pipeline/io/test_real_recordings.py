@@ -119,8 +119,8 @@ def test_mcap_of_the_ros1_profile_reads_like_its_bag(tmp_path: Path) -> None:
         np.testing.assert_array_equal(stop.T_odom_base, twin.T_odom_base)
         for frame in problem.frames:
             np.testing.assert_array_equal(stop.clouds[frame], twin.clouds[frame])
-    for lidar, twin in zip(problem.lidars, original.lidars, strict=True):
-        np.testing.assert_array_equal(lidar.T_base_lidar, twin.T_base_lidar)
+    for lidar, lidar_twin in zip(problem.lidars, original.lidars, strict=True):
+        np.testing.assert_array_equal(lidar.T_base_lidar, lidar_twin.T_base_lidar)
 
 
 def test_mcap_of_the_ros1_profile_is_retagged_into_a_ros1_bag(tmp_path: Path) -> None:

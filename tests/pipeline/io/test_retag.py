@@ -41,6 +41,7 @@ def test_the_copy_reads_back_with_the_calibrated_extrinsics(
         np.testing.assert_array_equal(ours.T_odom_base, theirs.T_odom_base)
         for frame, cloud in theirs.clouds.items():
             np.testing.assert_array_equal(ours.clouds[frame], cloud)
+    assert source.recording is not None
     assert written.messages == source.recording.message_count - written.replaced_messages + 1
     assert written.format == ("ros1" if name == "ros1" else "ros2-mcap")
 

@@ -162,7 +162,7 @@ def test_true_base_follows_the_floor_while_odometry_stays_planar() -> None:
 def test_floor_points_lie_on_the_floor_with_the_true_tilted_poses_only() -> None:
     spec = short("uneven-floor")
     problem, truth = small_problem("uneven-floor", seed=2, rate_scale=0.1)
-    assert truth.floor is not None
+    assert truth.floor is not None and problem.recording is not None
     planar = spec.motion.poses(
         np.array([stop.t_start - problem.recording.t_start for stop in problem.stops])
     )

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.problem import ScanPattern
-from pipeline.synth.lidar_models import Mid70, Mid360, SpinningLidar
+from pipeline.synth.lidar_models import BeamField, Mid70, Mid360, SpinningLidar
 
 
 def _coverage(directions: np.ndarray, cell_deg: float = 0.5) -> float:
@@ -90,7 +90,7 @@ def test_spinning_mask_must_be_ordered() -> None:
 
 
 @pytest.mark.parametrize("name", ["ring", "channel", "laser_id"])
-def test_spinning_lidar_names_its_beam_field_as_its_driver_does(name: str) -> None:
+def test_spinning_lidar_names_its_beam_field_as_its_driver_does(name: BeamField) -> None:
     model = SpinningLidar(beams=32, elevation_deg=(-25.0, 15.0), beam_field=name)
     firing = model.firing(0.0, 0.01)
     fields = model.point_fields(firing.directions * 5.0)

@@ -12,6 +12,7 @@ import pytest
 import pipeline.synth.random_scenario as module
 from pipeline.errors import ConfigError
 from pipeline.synth.lidar_models import Mid70, Mid360, SpinningLidar
+from pipeline.synth.motion import Arc, RouteMotion
 from pipeline.synth.random_scenario import (
     CLOCKS,
     RANGES,
@@ -83,6 +84,7 @@ def test_the_class_says_what_was_drawn() -> None:
 def test_routines_stay_inside_their_ranges() -> None:
     for seed in SEEDS:
         motion = _spec(seed).motion
+        assert isinstance(motion, RouteMotion)
         routine = _spec(seed).scenario_class.split("/")[0]
         assert all(_within(d, RANGES.dwell_s) for d in motion.dwell_s)
         t = np.linspace(0, motion.duration_s, 4000)
@@ -90,7 +92,7 @@ def test_routines_stay_inside_their_ranges() -> None:
         assert np.abs(linear[:, 0]).max() <= RANGES.drive_mps[1] + 1e-9
         assert np.degrees(np.abs(angular[:, 2])).max() <= RANGES.turn_dps[1] + 1e-9
         segments = [s for leg in motion.legs for s in leg]
-        peak_turn = max(abs(s.angle_deg) / s.duration_s for s in segments if s.kind == "arc")
+        peak_turn = max(abs(s.angle_deg) / s.duration_s for s in segments if isinstance(s, Arc))
         assert _within(1.875 * peak_turn, (0, RANGES.turn_dps[1]))
         stops = motion.poses(motion.stop_intervals()[:, 0])
         steps = np.linalg.norm(np.diff(stops[:, :2, 3], axis=0), axis=1)

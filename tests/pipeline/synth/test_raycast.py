@@ -40,13 +40,13 @@ def _grid_towards_box(n: int = 160) -> np.ndarray:
 def _inside_box(points: np.ndarray, margin: float) -> np.ndarray:
     local = points - BOX.T_world_object[:3, 3]
     half = np.array([0.2, 0.2, 0.125]) + margin
-    return np.all(np.abs(local) <= half, axis=1)
+    return np.asarray(np.all(np.abs(local) <= half, axis=1))
 
 
 def _box_distance(points: np.ndarray) -> np.ndarray:
     """Euclidean distance from points outside the (axis-aligned) box to it; 0 inside."""
     excess = np.abs(points - BOX.T_world_object[:3, 3]) - np.array([0.2, 0.2, 0.125])
-    return np.linalg.norm(np.maximum(excess, 0.0), axis=1)
+    return np.asarray(np.linalg.norm(np.maximum(excess, 0.0), axis=1))
 
 
 def test_hits_lie_on_floor_or_box_and_the_robot_is_ignored() -> None:

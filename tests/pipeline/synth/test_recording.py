@@ -68,9 +68,11 @@ def test_load_truth_matches_the_world(tiny_dir: Path) -> None:
         np.testing.assert_allclose(
             loaded.T_base_lidar_initial, lidar.T_base_lidar_initial, atol=1e-12
         )
-    for loaded, stop in zip(truth.stops, expected.stops, strict=True):
-        np.testing.assert_allclose(loaded.T_odom_base_initial, stop.T_odom_base_initial, atol=1e-12)
-        assert loaded.t_start == stop.t_start
+    for loaded_stop, stop in zip(truth.stops, expected.stops, strict=True):
+        np.testing.assert_allclose(
+            loaded_stop.T_odom_base_initial, stop.T_odom_base_initial, atol=1e-12
+        )
+        assert loaded_stop.t_start == stop.t_start
     assert len(truth.objects) == len(expected.objects)
     assert truth.labels["lidar_front"].offsets[-1] == len(truth.labels["lidar_front"].is_bleeding)
 

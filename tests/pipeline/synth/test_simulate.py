@@ -137,6 +137,7 @@ def test_moving_scan_points_are_in_the_sensor_frame_at_their_firing_time() -> No
     lidar = 0
     period = world.scan_period_ns(lidar)
     motion = world.spec.motion
+    assert isinstance(motion, ArcMotion)
     # The scan in the middle of the first move, where the robot is fastest.
     moving = round((motion.dwell_s + motion.move_s / 2) * 1e9 / period)
     assert not world.is_still(lidar, moving)

@@ -85,7 +85,9 @@ def test_moving_points_are_labelled_on_the_walker_where_it_is_at_each_scan() -> 
 
 
 def _distance_to_walkers(world, points: np.ndarray, t: float) -> np.ndarray:  # type: ignore[no-untyped-def]
-    return np.min([walker.at(t).distance(points) for walker in world.scene.walkers], axis=0)
+    return np.asarray(
+        np.min([walker.at(t).distance(points) for walker in world.scene.walkers], axis=0)
+    )
 
 
 def test_labels_of_a_scene_without_walkers_say_nothing_moves(tiny_problem) -> None:  # type: ignore[no-untyped-def]

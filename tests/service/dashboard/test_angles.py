@@ -6,8 +6,8 @@ from typing import Any
 
 from pipeline.result_model import rpy_deg
 from tests.service.dashboard import test_browser
+from tests.service.dashboard.browser import open_page, wait_for
 from tests.service.dashboard.conftest import LiveApp
-from tests.service.dashboard.test_browser import open_page, wait_for
 
 signed_in = test_browser.signed_in  # the fixture: the browser with the read key entered
 

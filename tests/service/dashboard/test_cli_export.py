@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 from typer.testing import CliRunner, Result
 
-from pipeline.cli import export as export_cli
+from client import export as export_cli
 from pipeline.export import ExportFormat
 from tests.pipeline.test_export import PARSERS, assert_recording_has, assert_same
 from tests.service.dashboard.conftest import LiveApp

@@ -282,7 +282,7 @@ def test_get_run_shows_the_result_once_stored(api: Api) -> None:
 
 
 def test_get_run_shows_the_problem_of_a_failed_run(api: Api) -> None:
-    from service.problems import problem_document
+    from service.problem_details import problem_document
 
     run_id = api.upload("R1").json()["id"]
     problem = problem_document(

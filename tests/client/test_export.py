@@ -12,7 +12,8 @@ import pytest
 import typer
 from typer.testing import CliRunner, Result
 
-from pipeline.cli import export as export_cli
+from client import export as export_cli
+from pipeline.export import ExportFormat
 from pipeline.io.writer import WriterFormat
 from pipeline.transforms import to_translation_xyzw
 from tests.pipeline.io.recordings import TRUE_EXTRINSICS, Spec, write_recording
@@ -40,7 +41,7 @@ def result_json(tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("fmt", list(PARSERS))
-def test_text_formats_to_stdout_round_trip(result_json: Path, fmt: str) -> None:
+def test_text_formats_to_stdout_round_trip(result_json: Path, fmt: ExportFormat) -> None:
     result = run(str(result_json), "--format", fmt)
     assert result.exit_code == 0, result.output
     assert_same(PARSERS[fmt](result.stdout), set1_document())
@@ -52,7 +53,7 @@ def test_out_writes_a_file_and_a_run_document_is_accepted(tmp_path: Path) -> Non
     out = tmp_path / "robot.urdf"
     result = run(str(saved), "-f", "urdf", "-o", str(out))
     assert result.exit_code == 0, result.output
-    assert_same(PARSERS["urdf"](out.read_text()), set1_document())
+    assert_same(PARSERS[ExportFormat.URDF](out.read_text()), set1_document())
     assert f"source: {saved}" in out.read_text()
 
 
