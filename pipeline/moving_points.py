@@ -30,10 +30,11 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 from pykdtree.kdtree import KDTree
 
+from pipeline.geometry import voxel_keys
+
 Points = NDArray[np.float64]
 Mask = NDArray[np.bool_]
 
-# A unit vector's cell index is at most 1 / cell size: < 2**15 for cells >= 0.002 deg.
 _MIN_CELL_DEG, _MAX_CELL_DEG = 0.01, 5.0
 
 
@@ -121,20 +122,21 @@ def _seen_through(points: Points, scan: NDArray[np.int64], config: MovingPointsC
     ranges = np.linalg.norm(points, axis=1)
     directions = points / np.maximum(ranges, 1e-9)[:, None]
     cell_size = np.radians(config.direction_cell_deg or _scan_spacing_deg(directions, scan))
-    cells = np.floor(directions / cell_size).astype(np.int64) + 2**15
-    cell = (cells[:, 0] << 32) | (cells[:, 1] << 16) | cells[:, 2]
+    cell = voxel_keys(directions, cell_size, "moving_points.direction_cell_deg")
     # Per cell, the farthest return and its scan, then the farthest of every other scan.
-    order = np.lexsort((-ranges, cell))
-    cell_sorted = cell[order]
-    starts = np.flatnonzero(np.r_[True, cell_sorted[1:] != cell_sorted[:-1]])
-    first = order[starts]
-    group = np.cumsum(np.r_[True, cell_sorted[1:] != cell_sorted[:-1]]) - 1
-    farthest = ranges[first][group]
-    farthest_scan = scan[first][group]
-    other_ranges = np.where(scan[order] != farthest_scan, ranges[order], -np.inf)
-    runner_up = np.maximum.reduceat(other_ranges, starts)[group]
+    order = np.argsort(cell, kind="stable")
+    cell_sorted, ranges_sorted, scan_sorted = cell[order], ranges[order], scan[order]
+    new_cell = np.r_[True, cell_sorted[1:] != cell_sorted[:-1]]
+    starts = np.flatnonzero(new_cell)
+    group = np.cumsum(new_cell) - 1
+    farthest = np.maximum.reduceat(ranges_sorted, starts)[group]
+    farthest_scan = np.empty(len(starts), dtype=np.int64)
+    is_farthest = ranges_sorted == farthest
+    farthest_scan[group[is_farthest]] = scan_sorted[is_farthest]
+    other_scan = scan_sorted != farthest_scan[group]
+    runner_up = np.maximum.reduceat(np.where(other_scan, ranges_sorted, -np.inf), starts)[group]
     farther_elsewhere = np.empty_like(ranges)
-    farther_elsewhere[order] = np.where(scan[order] != farthest_scan, farthest, runner_up)
+    farther_elsewhere[order] = np.where(other_scan, farthest, runner_up)
     margin = config.range_margin_m + config.range_margin_fraction * ranges
     seen_through: Mask = farther_elsewhere > ranges + margin
     return seen_through
