@@ -175,8 +175,8 @@ def denoise(
         result = denoise(stop.clouds[frame], config.denoise)
         cloud = stop.clouds[frame][result.keep]
 
-    (the pipeline runs it through `calibrate.denoise_above_floor`, judging what stands above the
-    floor).
+    (the pipeline runs it through `pipeline.stages.denoise_stage.denoise_above_floor`, judging what
+    stands above the floor).
 
     `points`: (N, 3) in the LiDAR frame (sensor at the origin). `optical_axis`: (3,) direction of
     the scan pattern's centre in that frame (default: `config.optical_axis`, Livox Mid-70: +x);
