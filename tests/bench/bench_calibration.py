@@ -11,6 +11,8 @@ by each method; the error of each non-reference LiDAR relative to the reference 
 rotation deg) is compared with the synthesiser's truth. Methods: `proposed` (the pipeline as
 configured by default), `point_to_point` (the same with the paper's point-to-point residual),
 `with_stage1` / `without_stage1` (the same with the noise filter switched on / off),
+`without_moving_points` (the same without removing the points that move within a stop; not run
+by default),
 `labelled_stage1` (stage 1 off, the synthesiser's labelled bleeding points removed instead: the
 best any noise filter could do),
 `without_rr` (no rough refinement, no floor terms), `entire_cloud` (the same optimiser on every
@@ -126,7 +128,13 @@ def calibration_errors(
     return t, r, sigma_t, sigma_r
 
 
-CONFIG_METHODS = ("proposed", "point_to_point", "with_stage1", "without_stage1")
+CONFIG_METHODS = (
+    "proposed",
+    "point_to_point",
+    "with_stage1",
+    "without_stage1",
+    "without_moving_points",
+)
 """Methods that are the pipeline with another configuration."""
 
 
@@ -139,6 +147,8 @@ def method_config(method: str) -> PipelineConfig:
         data["optimisation"]["residual"] = "point_to_point"
     elif method in ("with_stage1", "without_stage1"):
         data["denoise"]["enabled"] = method == "with_stage1"
+    elif method == "without_moving_points":
+        data["moving_points"]["enabled"] = False
     elif method != "proposed":
         raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
     return config_from_mapping(data)

@@ -50,7 +50,11 @@ SUCCESS = (0.005, 0.1)
 """Within this translation (m) and rotation (deg) error a calibration succeeded."""
 PASS_OK = (0.010, 0.3)
 """A passed verdict is right within this error, a false pass beyond it."""
-PAIRS = (("with_stage1", "without_stage1"), ("proposed", "point_to_point"))
+PAIRS = (
+    ("with_stage1", "without_stage1"),
+    ("proposed", "point_to_point"),
+    ("proposed", "without_moving_points"),
+)
 
 
 @dataclass
