@@ -1,6 +1,8 @@
 """`fleetcal synth SCENARIO --out DIR`: write a synthetic recording and its ground truth.
 
-`fleetcal synth random --seed N --out DIR` writes the randomised scenario the seed draws.
+`fleetcal synth random --seed N --out DIR` writes the randomised scenario the seed draws;
+`--world room` (people, uneven-floor, dust, factory, open, or random: the seed draws one) puts
+the same draw into that world.
 """
 
 from __future__ import annotations
@@ -36,19 +38,32 @@ def synth_command(
         float, typer.Option(help="multiplies every LiDAR's point rate (0.1 for quick tests)")
     ] = 1.0,
     ros1: Annotated[bool, typer.Option("--ros1", help="also write recording.bag (ROS 1)")] = False,
+    world: Annotated[
+        str | None,
+        typer.Option(
+            help="random only: open, room, people, uneven-floor, dust, factory, or random (the "
+            "seed draws one); left out, the open floor as before worlds existed"
+        ),
+    ] = None,
 ) -> None:
     """Synthesise SCENARIO with MuJoCo into DIR/recording (ROS 2 bag, MCAP) plus truth.json.
 
     The recording follows the input contract (PointCloud2 per LiDAR, /odom, /tf_static with
     perturbed extrinsics); truth.json and labels.npz hold the true poses and noise labels.
     """
+    from pipeline.errors import ConfigError
     from pipeline.synth.random_scenario import random_scenario
     from pipeline.synth.recording import write_recording
     from pipeline.synth.scenarios import get_scenario
 
     started = time.perf_counter()
     with user_errors():
-        spec = random_scenario(seed) if scenario == RANDOM else get_scenario(scenario)
+        if world is not None and scenario != RANDOM:
+            raise ConfigError(
+                f"--world is for `fleetcal synth random`; {scenario!r} has its own world "
+                "(the world scenarios are room, people, uneven-floor, dust and factory)"
+            )
+        spec = random_scenario(seed, world=world) if scenario == RANDOM else get_scenario(scenario)
         progress(f"synthesising {spec.name} (seed {seed}, rate x{rate_scale:g}) into {out}")
         if scenario == RANDOM:
             progress(f"{spec.name}: class {spec.scenario_class}; {spec.description}")

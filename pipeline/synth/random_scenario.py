@@ -31,12 +31,30 @@
 | clock | synced, simulated, lidar-offset |
 | simulated: header clock at the recording's start | 0-3600 s |
 | lidar-offset: each LiDAR's header clock off by (one or more LiDARs) | -180..-30 days |
+| world (only where asked for, `world=`) | open, room, people, uneven-floor, dust, factory |
+| room: walls from the path's start (farther where the path reaches: below) | 2-5 m |
+| room: wall height; shelf height; doorways | 2-3 m; 1.5-2 m; 1-2 |
+| people: walkers; speed | 1-3; 0.5-1.5 m/s |
+| people: walkway from the path's start (farther where the path reaches: below) | 1-3.5 m |
+| uneven floor: wave amplitude; wavelength; slope; joint | 3-5 mm; 1-3 m; 0.2-0.5 deg; 2-5 mm |
+| dust: share of returns; range | 0.3 %; 0.1-1.5 m |
 
 A Mid-360-like head hangs upside down (roll 180 deg plus the drawn roll), as robots mount it to
 see the floor. A LiDAR sits on the chassis outline in the direction it faces. Objects stand
 clear of the robot's swept path (its half-diagonal plus 0.3 m plus their own footprint) and
-0.3 m apart. Each concern draws from its own random stream, so a new axis (the world, issue 14)
-leaves the others' draws alone. The world is the open floor.
+0.3 m apart. Each concern draws from its own random stream, so a new axis leaves the others'
+draws alone.
+
+The world (issue 14) is an opt-in axis: `random_scenario(seed)` (and `fleetcal synth random`
+without `--world`) is the open floor, exactly as before the axis existed. `world=NAME` puts the
+same robot, routine, objects, errors and clocks into that world (`factory`: a room, people and
+carts, an uneven floor and dust at once); `world="random"` draws it from the seed's own world
+stream. The class gains the world (`rotate/rosette/small/room`), `spec.world` names it, and the
+scene holds its options (`SceneSpec.room`, `walkers`, `floor`, `dust`), whose details the seed
+draws when the world is made. The room is centred on the path's start, so its walls stand at
+least the path's reach, plus a shelf's depth, plus an aisle (0.3 m; 1.5 m where people walk)
+away; likewise a walkway keeps the path's reach plus the walker's size away. Objects a wall,
+shelf or walkway takes the place of are left out (the truth's `objects` lists those placed).
 """
 
 from __future__ import annotations
@@ -48,9 +66,12 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 from pipeline.errors import ConfigError
+from pipeline.synth.dust import DustSpec
+from pipeline.synth.floor import FloorSpec
 from pipeline.synth.lidar_models import BeamField, LidarModel, Mid70, Mid360, SpinningLidar
 from pipeline.synth.motion import RouteMotion
 from pipeline.synth.perturbation import PerturbationBounds, PlanarDrift
+from pipeline.synth.room import RoomSpec
 from pipeline.synth.routines import (
     Speeds,
     figure_eight,
@@ -62,6 +83,7 @@ from pipeline.synth.routines import (
 )
 from pipeline.synth.scenarios import LidarMount, ScenarioSpec, WorldKind
 from pipeline.synth.scene import ObjectKind, PlacedObject, SceneSpec
+from pipeline.synth.walkers import WalkerKind, WalkersSpec
 
 Range = tuple[float, float]
 ROUTINES = ("rotate", "loop", "figure-eight", "lane")
@@ -69,10 +91,31 @@ SENSOR_MIXES = ("rosette", "spinning", "mixed")
 ERROR_SIZES = ("small", "large")
 CLOCKS = ("synced", "simulated", "lidar-offset")
 BEAM_FIELDS: tuple[BeamField | None, ...] = ("ring", "channel", "laser_id", None)
+WORLDS = ("open", "room", "people", "uneven-floor", "dust", "factory")
+RANDOM_WORLD = "random"
+"""`world=` this draws one of `WORLDS` from the seed."""
+_WORLD_KINDS = {
+    "open": WorldKind.OPEN_FLOOR,
+    "room": WorldKind.ROOM,
+    "people": WorldKind.PEOPLE,
+    "uneven-floor": WorldKind.UNEVEN_FLOOR,
+    "dust": WorldKind.DUST,
+    "factory": WorldKind.FACTORY,
+}
+# Which of the scene's options each world sets.
+_WORLD_OPTIONS = {
+    "open": (),
+    "room": ("room",),
+    "people": ("walkers",),
+    "uneven-floor": ("floor",),
+    "dust": ("dust",),
+    "factory": ("room", "walkers", "floor", "dust"),
+}
 _PLACEMENT_TRIES = 400
+_WALKWAY_MARGIN_M = 0.05
 _DAY_NS = 86_400 * 1_000_000_000
 # Stream ids: one random stream per concern.
-_CLASS, _ROUTINE, _LIDARS, _OBJECTS, _ERRORS, _CLOCK = range(6)
+_CLASS, _ROUTINE, _LIDARS, _OBJECTS, _ERRORS, _CLOCK, _WORLD = range(7)
 
 
 class RandomRanges(BaseModel):
@@ -113,26 +156,42 @@ class RandomRanges(BaseModel):
     drift_rotation_deg: Range = (0.0, 3.0)
     simulated_start_s: Range = (0.0, 3600.0)
     lidar_clock_offset_days: Range = (-180.0, -30.0)
+    room: RoomSpec = RoomSpec()
+    room_aisle_m: float = 0.3
+    walkway_aisle_m: float = 1.5
+    room_wall_spread_m: float = 1.0
+    walkers: WalkersSpec = WalkersSpec(count=(1, 3))
+    floor: FloorSpec = FloorSpec()
+    dust: DustSpec = DustSpec()
 
 
 RANGES = RandomRanges()
 
 
-def scenario_class(routine: str, sensors: str, errors: str) -> str:
-    return f"{routine}/{sensors}/{errors}"
+def scenario_class(routine: str, sensors: str, errors: str, world: str | None = None) -> str:
+    return f"{routine}/{sensors}/{errors}" + (f"/{world}" if world is not None else "")
 
 
 def scenario_classes() -> tuple[str, ...]:
-    """Every class a draw can have."""
+    """Every class a draw without a world can have (a world's adds `/WORLD`)."""
     return tuple(
         scenario_class(r, s, e) for r in ROUTINES for s in SENSOR_MIXES for e in ERROR_SIZES
     )
 
 
-def random_scenario(seed: int, ranges: RandomRanges = RANGES) -> ScenarioSpec:
-    """The scenario `seed` draws (the same for the same seed); see the module docstring."""
+def random_scenario(
+    seed: int, ranges: RandomRanges = RANGES, *, world: str | None = None
+) -> ScenarioSpec:
+    """The scenario `seed` draws (the same for the same seed); see the module docstring.
+    `world`: one of `WORLDS` or `RANDOM_WORLD`; None is the open floor with the class and spec
+    of the draws made before the world axis existed."""
     if seed < 0:
         raise ConfigError(f"seed must be 0 or more, got {seed}")
+    if world is not None and world not in (*WORLDS, RANDOM_WORLD):
+        raise ConfigError(
+            f"unknown world {world!r}; choose one of: {', '.join(WORLDS)} or {RANDOM_WORLD} "
+            "(the seed draws one)"
+        )
     rng = np.random.default_rng([seed, _CLASS])
     routine, sensors, errors = (
         str(rng.choice(ROUTINES)),
@@ -169,7 +228,66 @@ def random_scenario(seed: int, ranges: RandomRanges = RANGES) -> ScenarioSpec:
         scenario_class=scenario_class(routine, sensors, errors),
     )
     offsets = _clock(spec, np.random.default_rng([seed, _CLOCK]), ranges)
-    return spec.model_copy(update={"header_clock_offset_ns": offsets})
+    spec = spec.model_copy(update={"header_clock_offset_ns": offsets})
+    if world is None:
+        return spec
+    if world == RANDOM_WORLD:
+        world = WORLDS[int(np.random.default_rng([seed, _WORLD]).integers(len(WORLDS)))]
+    return spec.model_copy(
+        update={
+            "description": f"{spec.description}; world: {world}",
+            "scene": _world_scene(world, scene, motion, ranges),
+            "world": _WORLD_KINDS[world],
+            "scenario_class": scenario_class(routine, sensors, errors, world),
+        }
+    )
+
+
+def world_name(spec: ScenarioSpec) -> str:
+    """Which of `WORLDS` a spec's world is."""
+    return next(name for name, kind in _WORLD_KINDS.items() if kind is spec.world)
+
+
+def _world_scene(
+    world: str, scene: SceneSpec, motion: RouteMotion, ranges: RandomRanges
+) -> SceneSpec:
+    """`scene` with the options `world` sets, sized so that the path stays clear of them."""
+    options = _WORLD_OPTIONS[world]
+    reach = scene.robot_band(motion.radius_band_m())[1]
+    update: dict[str, object] = {}
+    if "room" in options:
+        room = ranges.room
+        aisle = ranges.walkway_aisle_m if "walkers" in options else ranges.room_aisle_m
+        low = max(
+            room.wall_distance_m[0], reach + room.shelf_depth_m[1] + room.shelf_gap_m[1] + aisle
+        )
+        high = max(room.wall_distance_m[1], low + ranges.room_wall_spread_m)
+        update["room"] = room.model_copy(update={"wall_distance_m": (low, high)})
+    if "walkers" in options:
+        walkers = ranges.walkers.model_copy(
+            update={
+                "kinds": (WalkerKind.PERSON, WalkerKind.CART)
+                if world == "factory"
+                else (WalkerKind.PERSON,)
+            }
+        )
+        low, high = walkers.offset_m
+        nearest = max(low, reach + _largest_walker_m(walkers) + _WALKWAY_MARGIN_M)
+        update["walkers"] = walkers.model_copy(
+            update={"offset_m": (nearest, max(high, nearest + high - low))}
+        )
+    if "floor" in options:
+        update["floor"] = ranges.floor
+    if "dust" in options:
+        update["dust"] = ranges.dust
+    return scene.model_copy(update=update)
+
+
+def _largest_walker_m(spec: WalkersSpec) -> float:
+    """The largest footprint radius a walker of `spec` can have."""
+    (_, x), (_, y), _ = spec.cart_size_m
+    cart = 0.5 * math.hypot(x, y) if WalkerKind.CART in spec.kinds else 0.0
+    return max(spec.person_radius_m[1] if WalkerKind.PERSON in spec.kinds else 0.0, cart)
 
 
 def _uniform(rng: np.random.Generator, bounds: Range) -> float:

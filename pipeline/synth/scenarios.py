@@ -61,9 +61,15 @@ class LidarMount(BaseModel):
 
 
 class WorldKind(enum.StrEnum):
-    """The world round the robot (walls, people and uneven floors are further kinds)."""
+    """The world round the robot: the open floor, or the options of a randomised world (the
+    scene's room, walkers, floor and dust)."""
 
     OPEN_FLOOR = "open-floor"
+    ROOM = "room"
+    PEOPLE = "people"
+    UNEVEN_FLOOR = "uneven-floor"
+    DUST = "dust"
+    FACTORY = "factory"
 
 
 class ScenarioSpec(BaseModel):

@@ -229,9 +229,14 @@ def place_objects(
 ) -> tuple[SceneObject, ...]:
     """Draw the objects. `keep_out`: inner and outer radius of the robot centre's path; `free`:
     whether a footprint circle keeps clear of the room and the walkers' ways (None: no such).
-    A ring's sector that a wall, shelf or walkway leaves no room in stays empty."""
+    A ring's sector that a wall, shelf or walkway leaves no room in stays empty, and a given
+    object (`spec.objects`) standing where one is is left out."""
     band = spec.robot_band(keep_out)
-    placed: list[SceneObject] = [obj.to_object() for obj in spec.objects]
+    placed: list[SceneObject] = [
+        obj
+        for obj in (given.to_object() for given in spec.objects)
+        if free is None or free(obj.T_world_object[:2, 3], obj.radius_xy + spec.object_gap_m)
+    ]
     for ring in spec.rings:
         count = int(rng.integers(ring.count[0], ring.count[1] + 1))
         offset = rng.random() * 2.0 * math.pi

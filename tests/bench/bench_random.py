@@ -2,12 +2,21 @@
 
     .venv/bin/python -m tests.bench.bench_random [--seeds 1000-1099] [--jobs 2]
         [--rate-scale 1.0] [--cache /tmp/fleetcal-bench-random] [--methods proposed ...]
+        [--worlds open,room,people,uneven-floor,dust,factory,random]
 
 For each seed the recording is synthesised once into `CACHE/recordings/rate-F/seed-N` (a
 recording left half-written is written again), then read from disk with `pipeline.io` and
 calibrated by each method, as a user's upload would be. Each (method, seed) result is kept in
 `CACHE/results/rate-F/METHOD/seed-N.json`, so an interrupted run resumes where it stopped.
 Seeds run in `--jobs` processes, each with one BLAS thread.
+
+`--worlds W1,W2,...` runs every seed in each world (`random_scenario(seed, world=W)`: the same
+robot, routine, objects, errors and clocks; only the world differs), cached per world under
+`CACHE/recordings/rate-F/world-W/seed-N` and `CACHE/results/rate-F/world-W/METHOD/seed-N.json`.
+The tables then gain the world in the class and a table per world, and a paired table sets each
+world against `open` on the same seeds ("with walls against without"): the differences of the
+recordings' errors (world - open), and how many recordings each came out better in. Without
+`--worlds` the run is the open floor exactly as before the world axis.
 
 The error of a recording is, over its non-reference LiDARs, the largest error of the calibrated
 `T_ref_lidar` against the truth (as `bench_calibration` measures it). Success: within 5 mm and
@@ -37,6 +46,7 @@ from dataclasses import asdict, dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
 
 from tests.bench.bench_calibration import (  # noqa: E402
     CONFIG_METHODS,
@@ -55,6 +65,9 @@ PAIRS = (
     ("proposed", "point_to_point"),
     ("proposed", "without_moving_points"),
 )
+OPEN_WORLD = "open"
+TIE = (0.5, 0.01)
+"""Error differences (mm, deg) within which a world and the open floor tie on a recording."""
 
 
 @dataclass
@@ -72,6 +85,8 @@ class SeedResult:
     passed: bool = False
     refused: str | None = None
     seconds: float = 0.0
+    world: str = ""
+    """The world the recording was made in (`WORLDS`); "" for a run without `--worlds`."""
 
     @property
     def max_translation(self) -> float:
@@ -105,51 +120,71 @@ def parse_seeds(text: str) -> list[int]:
 # -- one seed (in a worker process) -----------------------------------------------------------
 
 
-def recording_dir(cache: Path, rate_scale: float, seed: int) -> Path:
-    return cache / "recordings" / f"rate-{rate_scale:g}" / f"seed-{seed}"
+def _rate_dir(kind: str, cache: Path, rate_scale: float, world: str | None) -> Path:
+    """`CACHE/KIND/rate-F`, and `world-W` under it for a run in a given world."""
+    out = cache / kind / f"rate-{rate_scale:g}"
+    return out if world is None else out / f"world-{world}"
 
 
-def result_path(cache: Path, rate_scale: float, method: str, seed: int) -> Path:
-    return cache / "results" / f"rate-{rate_scale:g}" / method / f"seed-{seed}.json"
+def recording_dir(cache: Path, rate_scale: float, seed: int, world: str | None = None) -> Path:
+    return _rate_dir("recordings", cache, rate_scale, world) / f"seed-{seed}"
 
 
-def ensure_recording(cache: Path, rate_scale: float, seed: int) -> tuple[Path, float]:
-    """The seed's recording directory, synthesised unless a complete one is cached; and the
-    seconds synthesis took (0 when cached)."""
+def result_path(
+    cache: Path, rate_scale: float, method: str, seed: int, world: str | None = None
+) -> Path:
+    return _rate_dir("results", cache, rate_scale, world) / method / f"seed-{seed}.json"
+
+
+def ensure_recording(
+    cache: Path, rate_scale: float, seed: int, world: str | None = None
+) -> tuple[Path, float]:
+    """The seed's recording directory (in `world`), synthesised unless a complete one is cached;
+    and the seconds synthesis took (0 when cached)."""
     from pipeline.synth.random_scenario import random_scenario
     from pipeline.synth.recording import write_recording
     from pipeline.synth.truth import TRUTH_FILE
 
-    out = recording_dir(cache, rate_scale, seed)
+    out = recording_dir(cache, rate_scale, seed, world)
     if (out / TRUTH_FILE).is_file():  # written last: its presence means the bag is complete
         return out, 0.0
     if out.exists():
         shutil.rmtree(out)
     started = time.perf_counter()
-    write_recording(random_scenario(seed), out, seed=seed, rate_scale=rate_scale)
+    spec = random_scenario(seed, world=world)
+    write_recording(spec, out, seed=seed, rate_scale=rate_scale)
     return out, time.perf_counter() - started
 
 
-def run_seed(cache: Path, rate_scale: float, seed: int, methods: Sequence[str]) -> list[SeedResult]:
-    """Synthesise (once) and calibrate one seed with each method not already cached."""
+def run_seed(
+    cache: Path,
+    rate_scale: float,
+    seed: int,
+    methods: Sequence[str],
+    world: str | None = None,
+) -> list[SeedResult]:
+    """Synthesise (once) and calibrate one seed (in `world`) with each method not already
+    cached."""
     from pipeline.calibrate import calibrate
     from pipeline.errors import PipelineError
     from pipeline.io import read_recording
-    from pipeline.synth.random_scenario import clock_kind, random_scenario
+    from pipeline.synth.random_scenario import clock_kind, random_scenario, world_name
     from pipeline.synth.truth import load_truth
 
-    spec = random_scenario(seed)
+    spec = random_scenario(seed, world=world)
     results = []
-    todo = [m for m in methods if not result_path(cache, rate_scale, m, seed).is_file()]
-    directory = recording_dir(cache, rate_scale, seed)
+    paths = {m: result_path(cache, rate_scale, m, seed, world) for m in methods}
+    todo = [m for m in methods if not paths[m].is_file()]
+    directory = recording_dir(cache, rate_scale, seed, world)
     if todo:
-        directory, _ = ensure_recording(cache, rate_scale, seed)
+        directory, _ = ensure_recording(cache, rate_scale, seed, world)
     for method in methods:
-        path = result_path(cache, rate_scale, method, seed)
+        path = paths[method]
         if method not in todo:
             results.append(SeedResult(**json.loads(path.read_text())))
             continue
         record = SeedResult(seed, method, spec.scenario_class, clock_kind(spec))
+        record.world = world_name(spec) if world is not None else ""
         started = time.perf_counter()
         try:
             config = method_config(method)
@@ -241,11 +276,6 @@ TABLE_HEADER = (
 )
 
 
-def class_part(index: int) -> Callable[[SeedResult], str]:
-    """The `index`-th part of a record's scenario class (routine/sensors/errors)."""
-    return lambda record: record.scenario_class.split("/")[index]
-
-
 def grouped_table(
     records: Iterable[SeedResult], key: Callable[[SeedResult], str], group: str
 ) -> str:
@@ -260,15 +290,21 @@ def grouped_table(
 
 
 def report(records: Sequence[SeedResult], methods: Sequence[str]) -> str:
-    """The markdown report: per method, by class and by each axis of the class and the clock."""
+    """The markdown report: per method, by class and by each axis of the class (the world where
+    the records have one) and the clock; then the pairs of methods, and of worlds against the
+    open floor."""
     out: list[str] = []
+    axes = ["routine", "sensors", "errors"]
+    worlds = any(r.world for r in records)
+    if worlds:
+        axes.append("world")
     for method in methods:
         mine = [r for r in records if r.method == method]
         out.append(f"## {method}: per scenario class\n")
         out.append(grouped_table(mine, lambda r: r.scenario_class, "class"))
-        for index, axis in enumerate(("routine", "sensors", "errors")):
+        for index, axis in enumerate(axes):
             out.append(f"\n## {method}: per {axis}\n")
-            out.append(grouped_table(mine, class_part(index), axis))
+            out.append(grouped_table(mine, class_axis(index), axis))
         out.append(f"\n## {method}: per header clock\n")
         out.append(grouped_table(mine, lambda r: r.clock, "clock"))
         out.append("")
@@ -277,17 +313,98 @@ def report(records: Sequence[SeedResult], methods: Sequence[str]) -> str:
             out.append(f"## {method} against {baseline}, recording by recording\n")
             out.append(paired_table(as_trials(records), method, baseline))
             out.append("")
+    if worlds:
+        for method in methods:
+            out.append(f"## {method}: each world against the open floor, on the same seeds\n")
+            out.append(world_pairs_table([r for r in records if r.method == method]))
+            out.append("")
     return "\n".join(out)
 
 
+def class_axis(index: int) -> Callable[[SeedResult], str]:
+    """A record's `index`-th axis of its class (routine, sensors, errors, world)."""
+    return lambda record: record.scenario_class.split("/")[index]
+
+
+@dataclass(frozen=True)
+class WorldPair:
+    """One seed in a world and on the open floor (one method)."""
+
+    world: SeedResult
+    open: SeedResult
+
+
+def world_pairs(records: Iterable[SeedResult]) -> dict[str, list[WorldPair]]:
+    """Per world other than open (sorted): its records paired with the open floor's of the same
+    seed and method, by seed. A seed missing on either side makes no pair."""
+    everything = list(records)
+    opens = {(r.seed, r.method): r for r in everything if r.world == OPEN_WORLD}
+    pairs: dict[str, list[WorldPair]] = defaultdict(list)
+    for r in sorted(everything, key=lambda r: (r.world, r.seed, r.method)):
+        if r.world not in ("", OPEN_WORLD) and (r.seed, r.method) in opens:
+            pairs[r.world].append(WorldPair(r, opens[(r.seed, r.method)]))
+    return dict(pairs)
+
+
+def world_pairs_row(label: str, pairs: Sequence[WorldPair]) -> str:
+    """Successes on each side; over the pairs both calibrated, the differences of the
+    recordings' errors (world - open: negative, the world is more accurate) and how many the
+    world won, tied (`TIE`) and lost, in translation and rotation; pairs one side refused."""
+    n = len(pairs)
+    success_world = sum(p.world.within(SUCCESS) for p in pairs)
+    success_open = sum(p.open.within(SUCCESS) for p in pairs)
+    both = [p for p in pairs if p.world.refused is None and p.open.refused is None]
+    dt = np.array([1000 * (p.world.max_translation - p.open.max_translation) for p in both])
+    dr = np.array([p.world.max_rotation - p.open.max_rotation for p in both])
+
+    def stats(values: NDArray[np.float64], digits: int) -> str:
+        if not len(values):
+            return "n/a | n/a | n/a"
+        return " | ".join(
+            f"{x:+.{digits}f}" for x in (values.mean(), np.median(values), values.max())
+        )
+
+    def record(values: NDArray[np.float64], tie: float) -> str:
+        won, lost = int((values < -tie).sum()), int((values > tie).sum())
+        return f"{won} / {len(values) - won - lost} / {lost}"
+
+    refused = (
+        f"{sum(p.world.refused is not None for p in pairs)} / "
+        f"{sum(p.open.refused is not None for p in pairs)}"
+    )
+    return (
+        f"| {label} | {n} | {success_world}/{n} | {success_open}/{n} "
+        f"| {stats(dt, 2)} | {stats(dr, 3)} "
+        f"| {record(dt, TIE[0])} | {record(dr, TIE[1])} | {refused} |"
+    )
+
+
+def world_pairs_table(records: Iterable[SeedResult]) -> str:
+    """A row per world against the open floor (one method's `records`), then all of them."""
+    pairs = world_pairs(records)
+    lines = [
+        "| world | pairs | success in world | success open "
+        "| mean dt (mm, world - open) | median dt | max dt "
+        "| mean dr (deg) | median dr | max dr "
+        f"| t won / tied / lost (tie: {TIE[0]:g} mm) | r won / tied / lost ({TIE[1]:g} deg) "
+        "| refused: world / open |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    lines += [world_pairs_row(world, pairs[world]) for world in pairs]
+    lines.append(world_pairs_row("**all**", [p for world in pairs for p in pairs[world]]))
+    return "\n".join(lines)
+
+
 def as_trials(records: Iterable[SeedResult]) -> dict[str, list[dict[str, Trial]]]:
-    """`bench_calibration`'s layout (class -> per seed -> method -> Trial), refusals left out."""
-    by_seed: dict[int, dict[str, Trial]] = defaultdict(dict)
-    classes: dict[int, str] = {}
+    """`bench_calibration`'s layout (class -> per recording -> method -> Trial), refusals left
+    out; a recording is a seed in a world."""
+    by_seed: dict[tuple[int, str], dict[str, Trial]] = defaultdict(dict)
+    classes: dict[tuple[int, str], str] = {}
     for r in records:
         if r.refused is None:
-            by_seed[r.seed][r.method] = Trial(r.translation, r.rotation, r.seconds, passed=r.passed)
-            classes[r.seed] = r.scenario_class
+            key = (r.seed, r.world)
+            by_seed[key][r.method] = Trial(r.translation, r.rotation, r.seconds, passed=r.passed)
+            classes[key] = r.scenario_class
     grouped: dict[str, list[dict[str, Trial]]] = defaultdict(list)
     for seed in sorted(by_seed):
         grouped[classes[seed]].append(by_seed[seed])
@@ -297,6 +414,22 @@ def as_trials(records: Iterable[SeedResult]) -> dict[str, list[dict[str, Trial]]
 # -- main ------------------------------------------------------------------------------------
 
 
+def parse_worlds(text: str | None) -> list[str | None]:
+    """`open,room` -> the worlds to run each seed in; None -> [None], the run without worlds."""
+    from pipeline.synth.random_scenario import RANDOM_WORLD, WORLDS
+
+    if text is None:
+        return [None]
+    worlds = [part.strip() for part in text.split(",") if part.strip()]
+    unknown = [w for w in worlds if w not in (*WORLDS, RANDOM_WORLD)]
+    if unknown or not worlds or len(set(worlds)) != len(worlds):
+        raise SystemExit(
+            f"--worlds {text!r}: name each world once, from {', '.join(WORLDS)} and "
+            f"{RANDOM_WORLD}, e.g. --worlds open,room (open is what the others are paired with)"
+        )
+    return list(worlds)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("--seeds", default="1000-1099", help="e.g. 1000-1099, 7 or 1,5,9-11")
@@ -304,13 +437,21 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--rate-scale", type=float, default=1.0, help="LiDAR point rate (1: full)")
     parser.add_argument("--cache", type=Path, default=Path("/tmp/fleetcal-bench-random"))
     parser.add_argument("--methods", nargs="*", default=["proposed"], choices=list(CONFIG_METHODS))
+    parser.add_argument(
+        "--worlds",
+        "--world",
+        help="run each seed in these worlds, e.g. open,room,people,uneven-floor,dust,factory "
+        "(random: the seed draws one); left out: the open floor, as before worlds existed",
+    )
     args = parser.parse_args(argv)
     seeds = parse_seeds(args.seeds)
+    worlds = parse_worlds(args.worlds)
     if args.jobs < 1 or not args.rate_scale > 0:
         raise SystemExit("--jobs must be 1 or more and --rate-scale positive")
     print(
         f"bench_random: {len(seeds)} seeds, rate x{args.rate_scale:g}, {args.jobs} jobs, "
-        f"methods {', '.join(args.methods)}, cache {args.cache}",
+        f"methods {', '.join(args.methods)}, cache {args.cache}"
+        + (f", worlds {args.worlds}" if args.worlds else ""),
         file=sys.stderr,
         flush=True,
     )
@@ -318,21 +459,26 @@ def main(argv: Sequence[str] | None = None) -> None:
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = {
-            pool.submit(run_seed, args.cache, args.rate_scale, seed, args.methods): seed
+            pool.submit(run_seed, args.cache, args.rate_scale, seed, args.methods, world): seed
             for seed in seeds
+            for world in worlds
         }
         for done, future in enumerate(as_completed(futures), start=1):
             results = future.result()
             records += results
             summary = "; ".join(f"{r.method} {describe(r)}" for r in results)
             print(
-                f"[{done}/{len(seeds)}, {time.perf_counter() - started:.0f} s] seed "
+                f"[{done}/{len(futures)}, {time.perf_counter() - started:.0f} s] seed "
                 f"{futures[future]} {results[0].scenario_class} ({results[0].clock}): {summary}",
                 file=sys.stderr,
                 flush=True,
             )
-    records.sort(key=lambda r: (r.method, r.seed))
-    print(f"# bench_random: seeds {args.seeds}, rate scale {args.rate_scale:g}\n")
+    records.sort(key=lambda r: (r.method, r.world, r.seed))
+    print(
+        f"# bench_random: seeds {args.seeds}, rate scale {args.rate_scale:g}"
+        + (f", worlds {args.worlds}" if args.worlds else "")
+        + "\n"
+    )
     print(report(records, args.methods))
 
 

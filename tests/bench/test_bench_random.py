@@ -10,10 +10,14 @@ from tests.bench.bench_random import (
     SeedResult,
     grouped_table,
     parse_seeds,
+    parse_worlds,
+    recording_dir,
     report,
     result_path,
     run_seed,
     summary_row,
+    world_pairs,
+    world_pairs_table,
 )
 
 
@@ -29,6 +33,7 @@ def _record(seed: int, mm: float, deg: float, passed: bool, **kw: object) -> See
         sigma_rotation=[deg / 2, deg / 2],
         passed=passed,
         seconds=2.0,
+        world=str(kw.get("world", "")),
     )
 
 
@@ -101,4 +106,85 @@ def test_cached_results_are_read_back_not_recomputed(tmp_path: Path) -> None:
     path.write_text(__import__("json").dumps(record.__dict__))
     # No recording is cached: were the result not reused, the seed would be synthesised.
     assert run_seed(tmp_path, 0.1, 42, ["proposed"]) == [record]
+    assert not (tmp_path / "recordings").exists()
+
+
+def _in_world(seed: int, world: str, mm: float, deg: float, **kw: object) -> SeedResult:
+    return _record(
+        seed, mm, deg, True, world=world, scenario_class=f"loop/mixed/small/{world}", **kw
+    )
+
+
+def test_worlds_parse_and_bad_ones_say_how() -> None:
+    assert parse_worlds(None) == [None]
+    assert parse_worlds("open, room,random") == ["open", "room", "random"]
+    for bad in ("open,warehouse", "open,open", ","):
+        with pytest.raises(SystemExit, match="name each world once"):
+            parse_worlds(bad)
+
+
+def test_each_world_has_its_own_cache_and_a_run_without_worlds_keeps_the_old_one() -> None:
+    cache = Path("/cache")
+    assert result_path(cache, 0.1, "proposed", 7) == cache / "results/rate-0.1/proposed/seed-7.json"
+    assert recording_dir(cache, 1.0, 7) == cache / "recordings/rate-1/seed-7"
+    assert result_path(cache, 0.1, "proposed", 7, "room") == (
+        cache / "results/rate-0.1/world-room/proposed/seed-7.json"
+    )
+    assert recording_dir(cache, 1.0, 7, "open") == cache / "recordings/rate-1/world-open/seed-7"
+
+
+def test_worlds_pair_with_the_open_floor_seed_by_seed_and_method_by_method() -> None:
+    records = [
+        _in_world(1, "open", 3.0, 0.05),
+        _in_world(1, "room", 1.0, 0.05),
+        _in_world(2, "open", 2.0, 0.04),
+        _in_world(2, "room", 4.0, 0.12),
+        _in_world(3, "room", 1.0, 0.01),  # no open run of seed 3: no pair
+        _in_world(1, "dust", 3.2, 0.05),
+        _in_world(1, "open", 9.0, 0.9, method="without_stage1"),
+    ]
+    pairs = world_pairs([r for r in records if r.method == "proposed"])
+    assert list(pairs) == ["dust", "room"]
+    assert [(p.world.seed, p.open.seed, p.open.world) for p in pairs["room"]] == [
+        (1, 1, "open"),
+        (2, 2, "open"),
+    ]
+    rows = world_pairs_table([r for r in records if r.method == "proposed"]).splitlines()
+    assert [_cells(row)[0] for row in rows[2:]] == ["dust", "room", "**all**"]
+    room = _cells(rows[3])
+    # Errors of a recording: its largest LiDAR's (3, 1, 2, 4 mm): differences -2 and +2 mm.
+    assert room[1:4] == ["2", "1/2", "2/2"]  # seed 2 in the room: 0.12 deg, no success
+    assert room[4:7] == ["+0.00", "+0.00", "+2.00"]
+    assert room[7:10] == ["+0.040", "+0.040", "+0.080"]
+    assert room[10:13] == ["1 / 0 / 1", "0 / 1 / 1", "0 / 0"]
+    assert _cells(rows[2])[10] == "0 / 1 / 0"  # dust: 0.2 mm worse is a tie
+    assert _cells(rows[4])[1] == "3"
+
+
+def test_a_refused_side_counts_as_no_success_and_leaves_the_differences() -> None:
+    refused = SeedResult(
+        1, "proposed", "loop/mixed/small/room", "synced", refused="X", world="room"
+    )
+    rows = world_pairs_table([_in_world(1, "open", 3.0, 0.05), refused]).splitlines()
+    cells = _cells(rows[2])
+    assert cells[1:4] == ["1", "0/1", "1/1"]
+    assert cells[4] == "n/a" and cells[-1] == "1 / 0"
+
+
+def test_a_report_with_worlds_has_a_table_per_world_and_the_pairs_and_without_none() -> None:
+    records = [_in_world(1, "open", 3.0, 0.05), _in_world(1, "room", 1.0, 0.05)]
+    text = report(records, ["proposed"])
+    assert "## proposed: per world" in text
+    assert "## proposed: each world against the open floor, on the same seeds" in text
+    assert "| loop/mixed/small/room | 1 |" in text
+    plain = report([_record(1, 3.0, 0.05, True)], ["proposed"])
+    assert "per world" not in plain and "open floor" not in plain
+
+
+def test_cached_results_of_a_world_are_read_back_not_recomputed(tmp_path: Path) -> None:
+    record = _in_world(42, "room", 3.0, 0.05)
+    path = result_path(tmp_path, 0.1, "proposed", 42, "room")
+    path.parent.mkdir(parents=True)
+    path.write_text(__import__("json").dumps(record.__dict__))
+    assert run_seed(tmp_path, 0.1, 42, ["proposed"], "room") == [record]
     assert not (tmp_path / "recordings").exists()

@@ -91,3 +91,13 @@ def test_synth_random_with_a_negative_seed_exits_2(tmp_path: Path) -> None:
     result = runner.invoke(app, ["synth", "random", "--seed", "-3", "--out", str(tmp_path / "x")])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert not (tmp_path / "x").exists()
+
+
+def test_synth_world_is_for_random_only_and_an_unknown_one_is_named(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["synth", "tiny", "--world", "room", "--out", str(tmp_path / "x")])
+    assert result.exit_code == 2 and "--world is for `fleetcal synth random`" in result.stderr
+    result = runner.invoke(
+        app, ["synth", "random", "--world", "warehouse", "--out", str(tmp_path / "x")]
+    )
+    assert result.exit_code == 2 and "unknown world 'warehouse'" in result.stderr
+    assert not (tmp_path / "x").exists()
