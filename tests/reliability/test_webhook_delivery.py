@@ -70,6 +70,20 @@ def _events(db: Database) -> set[tuple[str, str]]:
     return {(kind, str(run_id)) for kind, run_id in expected}
 
 
+def _refused_once(db: Database) -> bool:
+    """Whether a delivery was refused at the connection (the receiver was down)."""
+    with db.session() as session:
+        errors = session.scalars(select(WebhookDelivery.last_error))
+        return any("ConnectError" in (error or "") for error in errors)
+
+
+def _all_delivered(db: Database, expected: int) -> bool:
+    """Whether there are `expected` deliveries, all delivered."""
+    with db.session() as session:
+        statuses = list(session.scalars(select(WebhookDelivery.status)))
+    return len(statuses) == expected and all(s == DeliveryStatus.DELIVERED for s in statuses)
+
+
 def test_every_event_arrives_once_across_a_killed_worker_and_a_restarted_receiver(
     settings: Settings, db: Database, tmp_path: Path
 ) -> None:
@@ -106,22 +120,11 @@ def test_every_event_arrives_once_across_a_killed_worker_and_a_restarted_receive
                 )
             )
 
-            def refused_once() -> bool:
-                with db.session() as session:
-                    errors = session.scalars(select(WebhookDelivery.last_error))
-                    return any("ConnectError" in (error or "") for error in errors)
-
-            wait_for("a delivery refused by the stopped receiver", refused_once, WAIT_S)
+            wait_for(
+                "a delivery refused by the stopped receiver", lambda: _refused_once(db), WAIT_S
+            )
             receiver.start()
-
-            def all_delivered() -> bool:
-                with db.session() as session:
-                    statuses = list(session.scalars(select(WebhookDelivery.status)))
-                return len(statuses) == len(expected) and all(
-                    status == DeliveryStatus.DELIVERED for status in statuses
-                )
-
-            wait_for("every delivery", all_delivered, WAIT_S)
+            wait_for("every delivery", lambda: _all_delivered(db, len(expected)), WAIT_S)
             output = workers[1].output()
     finally:
         release.set()
