@@ -101,6 +101,7 @@ def named_lidar_frames(config: PipelineConfig) -> dict[str, tuple[str, ...]]:
         "frames.reference_frame": () if reference is None else (reference,),
         "denoise.scan_patterns": tuple(config.denoise.scan_patterns),
         "denoise.optical_axes": tuple(config.denoise.optical_axes),
+        "denoise.range_noise_m": tuple(config.denoise.range_noise_m),
     }
 
 
