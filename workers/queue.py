@@ -161,9 +161,13 @@ def give_back(db: Database, held: Claim) -> bool:
         return _held_update(session, held, values) == 1
 
 
-def reap(db: Database) -> Reaped:
+def reap(db: Database, spare_owner: str | None = None) -> Reaped:
     """Re-queue runs whose lease expired, or fail those that used up their attempts, naming the
     stage the last holder had reached.
+
+    `spare_owner`: a worker's own id. A worker never reaps its own runs: it watches their
+    pipeline processes itself, so an expired lease there only means its heartbeat ran late (a
+    stalled machine or database), never that the run was abandoned.
 
     Safe to run from every worker at once: the expired rows are locked (skipping those another
     reaper holds) and re-checked under the lock.
@@ -172,12 +176,16 @@ def reap(db: Database) -> Reaped:
     failed: list[uuid.UUID] = []
     with db.transaction() as session:
         now = db_now(session)
+        abandoned = [
+            Run.status == RunStatus.RUNNING,
+            or_(Run.lease_expires_at < now, Run.lease_expires_at.is_(None)),
+        ]
+        if spare_owner is not None:
+            held_here = Run.lease_owner.startswith(f"{spare_owner}#", autoescape=True)
+            abandoned.append(or_(Run.lease_owner.is_(None), ~held_here))
         expired = session.scalars(
             select(Run)
-            .where(
-                Run.status == RunStatus.RUNNING,
-                or_(Run.lease_expires_at < now, Run.lease_expires_at.is_(None)),
-            )
+            .where(*abandoned)
             .order_by(Run.lease_expires_at)
             .limit(REAP_BATCH)
             .with_for_update(skip_locked=True)

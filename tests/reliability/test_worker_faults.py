@@ -33,7 +33,10 @@ pytestmark = pytest.mark.slow
 
 WORKER_STAGES = ("download", "read", *STAGES, "drift", "report")
 """Every stage a run goes through in the worker (`drift`: against the model's design)."""
-LEASE_S = 2
+LEASE_S = 5
+"""Short, for a test that waits out a dead worker's lease seven times; long enough that a living
+worker's heartbeat, delayed by SQLite's write lock on a loaded machine, never lets it lapse (each
+worker here runs beside the one about to be killed, and would reap its runs)."""
 WAIT_S = 240  # only keeps a broken worker from hanging CI; never a timing assertion
 TINY_FRAMES = ("lidar_front", "lidar_rear")
 

@@ -17,6 +17,7 @@ from service.db import Database
 from service.models import Result, RunStatus
 from service.settings import Settings
 from tests.workers.runs import enqueue, run_row, running_worker, wait_for
+from workers import queue
 from workers.pool import BLAS_THREAD_VARIABLES, PoolError
 from workers.worker import Worker, WorkerOptions
 
@@ -200,10 +201,18 @@ def test_a_worker_waits_out_an_unreachable_database(
 
 
 def test_the_heartbeat_keeps_a_run_longer_than_its_lease(settings: Settings, db: Database) -> None:
-    """The run takes 2.5 leases; the worker's own reaper runs meanwhile and must leave it alone."""
+    """The run takes 2.5 leases; another worker's reaper (the test's) runs meanwhile and must
+    leave it alone (the worker's own reaper spares its runs whatever their lease)."""
     short_lease = settings.model_copy(update={"run_lease_seconds": 2})
     run_id = enqueue(db, config={"sleep": 5})
+    reaped: list[queue.Reaped] = []
+
+    def finished_unreaped() -> bool:
+        reaped.append(queue.reap(db, spare_owner="another-worker"))
+        return finished(db, run_id)()
+
     with running_worker(short_lease):
-        wait_for("the run", finished(db, run_id))
+        wait_for("the run", finished_unreaped)
     row = run_row(db, run_id)
     assert row.status == RunStatus.SUCCEEDED and row.attempts == 1, "never reaped"
+    assert set(reaped) == {queue.Reaped()}
