@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 
 from pipeline.config import PipelineConfig
-from pipeline.moving_points import find_moving_points, scan_ids
+from pipeline.moving_points import MovingPointsConfig, find_moving_points, scan_ids
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail
 from pipeline.transforms import Points
@@ -21,37 +21,26 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     clouds: list[tuple[Points, ...]] = []
     sizes: list[tuple[tuple[int, ...], ...]] = []
     details: dict[str, Detail] = {"enabled": settings.enabled}
-    judged = skipped = 0
+    judged = skipped = total = 0
     unknown = tuple(((),) * len(row) for row in state.clouds_in_lidar)
     for lidar, row, row_sizes in zip(
         state.lidars, state.clouds_in_lidar, state.scan_sizes or unknown, strict=True
     ):
         kept_row, sizes_row, removed = [], [], 0
         for cloud, scan_sizes in zip(row, row_sizes, strict=True):
-            found = (
-                find_moving_points(cloud, scan_sizes, settings)
-                if settings.enabled and scan_sizes
-                else None
-            )
-            if found is None or found.skipped:
-                skipped += found is not None or (settings.enabled and len(cloud) > 0)
-                kept_row.append(cloud)
-                sizes_row.append(scan_sizes)
-                continue
-            judged += 1
-            keep = ~found.moving
-            kept_row.append(cloud[keep] if found.moving.any() else cloud)
-            sizes_row.append(
-                tuple(
-                    int(n)
-                    for n in np.bincount(scan_ids(scan_sizes)[keep], minlength=len(scan_sizes))
-                )
-            )
-            removed += int(found.moving.sum())
+            kept, kept_sizes, moving = _without_moving(cloud, scan_sizes, settings)
+            kept_row.append(kept)
+            sizes_row.append(kept_sizes)
+            if moving is None:
+                # Not judged: its scans are unknown or too few (an empty cloud has nothing).
+                skipped += settings.enabled and len(cloud) > 0
+            else:
+                judged += 1
+                removed += moving
         clouds.append(tuple(kept_row))
         sizes.append(tuple(sizes_row))
         details[f"removed_points.{lidar.frame}"] = removed
-    total = sum(int(v) for k, v in details.items() if k.startswith("removed_points."))
+        total += removed
     details.update(removed_points=total, judged_clouds=judged, skipped_clouds=skipped)
     new_state = dataclasses.replace(state, clouds_in_lidar=tuple(clouds), scan_sizes=tuple(sizes))
     return StageOutcome(
@@ -59,3 +48,20 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         details,
         f"{total} moving points removed from {judged} stop clouds ({skipped} not judged)",
     )
+
+
+def _without_moving(
+    cloud: Points, scan_sizes: tuple[int, ...], settings: MovingPointsConfig
+) -> tuple[Points, tuple[int, ...], int | None]:
+    """One stop cloud without its moving points, its scans' new sizes, and how many points
+    moved (None: the cloud was not judged, and comes back as it was)."""
+    found = (
+        find_moving_points(cloud, scan_sizes, settings) if settings.enabled and scan_sizes else None
+    )
+    if found is None or found.skipped:
+        return cloud, scan_sizes, None
+    if not found.moving.any():
+        return cloud, scan_sizes, 0
+    keep = ~found.moving
+    kept_sizes = np.bincount(scan_ids(scan_sizes)[keep], minlength=len(scan_sizes))
+    return cloud[keep], tuple(int(n) for n in kept_sizes), int(found.moving.sum())

@@ -4,6 +4,7 @@ per LiDAR; a world without walkers loses nothing."""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import cast
 
 import numpy as np
@@ -56,3 +57,18 @@ def test_removed_points_are_the_walkers(scenario: str, walkers: bool) -> None:
     else:
         assert removed == 0
     assert details["judged_clouds"] > 0
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_clouds_whose_scans_are_unknown_are_counted_as_not_judged(enabled: bool) -> None:
+    """A recording that does not say which points came in which scan (no `scan_sizes`) keeps
+    every point; with the stage enabled each non-empty cloud is counted as not judged."""
+    problem, _ = simulate_problem("set1-box", seed=0, rate_scale=0.05)
+    config = PipelineConfig.model_validate({"moving_points": {"enabled": enabled}})
+    state = dataclasses.replace(initial_state(problem, config.frames), scan_sizes=None)
+    outcome = moving.run(state, config, Listeners())
+    non_empty = sum(len(cloud) > 0 for row in state.clouds_in_lidar for cloud in row)
+    assert non_empty > 0
+    assert outcome.details["skipped_clouds"] == (non_empty if enabled else 0)
+    assert outcome.details["judged_clouds"] == outcome.details["removed_points"] == 0
+    assert outcome.state.clouds_in_lidar == state.clouds_in_lidar
