@@ -61,11 +61,14 @@ def test_removed_points_are_the_walkers(scenario: str, walkers: bool) -> None:
 
 @pytest.mark.parametrize("enabled", [True, False])
 def test_clouds_whose_scans_are_unknown_are_counted_as_not_judged(enabled: bool) -> None:
-    """A recording that does not say which points came in which scan (no `scan_sizes`) keeps
-    every point; with the stage enabled each non-empty cloud is counted as not judged."""
+    """A recording that does not say which points came in which scan (empty `scan_sizes`, as
+    `initial_state` makes them then) keeps every point; with the stage enabled each non-empty
+    cloud is counted as not judged."""
     problem, _ = simulate_problem("set1-box", seed=0, rate_scale=0.05)
     config = PipelineConfig.model_validate({"moving_points": {"enabled": enabled}})
-    state = dataclasses.replace(initial_state(problem, config.frames), scan_sizes=None)
+    known = initial_state(problem, config.frames)
+    unknown = tuple(((),) * len(row) for row in known.clouds_in_lidar)
+    state = dataclasses.replace(known, scan_sizes=unknown)
     outcome = moving.run(state, config, Listeners())
     non_empty = sum(len(cloud) > 0 for row in state.clouds_in_lidar for cloud in row)
     assert non_empty > 0
