@@ -23,6 +23,10 @@ class Holdings:
         with self._lock:
             return list(self._held.values())
 
+    def run_ids(self) -> set[uuid.UUID]:
+        with self._lock:
+            return set(self._held)
+
     def mark_lost(self, claim: Claim) -> None:
         """The run's lease is gone (reaped, or finished elsewhere), if it is still held."""
         with self._lock:

@@ -16,6 +16,7 @@ on when a lease expires; the embedded SQLite database lives on one machine and u
 from __future__ import annotations
 
 import uuid
+from collections.abc import Collection
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any
@@ -161,13 +162,14 @@ def give_back(db: Database, held: Claim) -> bool:
         return _held_update(session, held, values) == 1
 
 
-def reap(db: Database, spare_owner: str | None = None) -> Reaped:
+def reap(db: Database, spare: Collection[uuid.UUID] = ()) -> Reaped:
     """Re-queue runs whose lease expired, or fail those that used up their attempts, naming the
     stage the last holder had reached.
 
-    `spare_owner`: a worker's own id. A worker never reaps its own runs: it watches their
-    pipeline processes itself, so an expired lease there only means its heartbeat ran late (a
-    stalled machine or database), never that the run was abandoned.
+    `spare`: the runs the reaping worker holds. It never reaps those: it watches their pipeline
+    processes itself, so an expired lease there only means its heartbeat ran late (a stalled
+    machine or database), never that the run was abandoned. A run it gave up (a result it could
+    not store) is no longer held, and is reaped like any other.
 
     Safe to run from every worker at once: the expired rows are locked (skipping those another
     reaper holds) and re-checked under the lock.
@@ -180,9 +182,8 @@ def reap(db: Database, spare_owner: str | None = None) -> Reaped:
             Run.status == RunStatus.RUNNING,
             or_(Run.lease_expires_at < now, Run.lease_expires_at.is_(None)),
         ]
-        if spare_owner is not None:
-            held_here = Run.lease_owner.startswith(f"{spare_owner}#", autoescape=True)
-            abandoned.append(or_(Run.lease_owner.is_(None), ~held_here))
+        if spare:
+            abandoned.append(Run.id.not_in(list(spare)))
         expired = session.scalars(
             select(Run)
             .where(*abandoned)

@@ -187,7 +187,7 @@ class Worker:
 
     def _reap(self) -> None:
         try:
-            reaped = queue.reap(self.db, spare_owner=self.id)
+            reaped = queue.reap(self.db, spare=self._holdings.run_ids())
         except SQLAlchemyError as err:
             log.warning("reaper: database unavailable (%s); will try again", short(err))
             return

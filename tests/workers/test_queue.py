@@ -116,18 +116,18 @@ def test_reaper_requeues_an_expired_lease_and_the_old_holder_loses_it(db: Databa
     assert row.status == RunStatus.SUCCEEDED and row.stage is None and row.progress == 1.0
 
 
-def test_a_worker_never_reaps_its_own_runs(db: Database) -> None:
-    """An expired lease of the reaping worker's own means its heartbeat ran late, not that the
-    run was abandoned; any other worker's reaper takes it back."""
+def test_a_worker_never_reaps_the_runs_it_holds(db: Database) -> None:
+    """An expired lease of a run the reaping worker holds means its heartbeat ran late, not that
+    the run was abandoned; any other worker's reaper takes it back."""
     run_id = enqueue(db)
     held = queue.claim(db, "late", LEASE)
     assert held is not None
     expire_lease(db, run_id)
 
-    assert queue.reap(db, spare_owner="late") == queue.Reaped()
+    assert queue.reap(db, spare={run_id}) == queue.Reaped()
     assert queue.renew(db, held, LEASE), "the late heartbeat still holds the run"
     expire_lease(db, run_id)
-    assert queue.reap(db, spare_owner="another").requeued == (run_id,)
+    assert queue.reap(db, spare={uuid.uuid4()}).requeued == (run_id,)
 
 
 def test_reaper_fails_a_run_after_its_last_attempt_naming_the_stage(db: Database) -> None:

@@ -202,13 +202,13 @@ def test_a_worker_waits_out_an_unreachable_database(
 
 def test_the_heartbeat_keeps_a_run_longer_than_its_lease(settings: Settings, db: Database) -> None:
     """The run takes 2.5 leases; another worker's reaper (the test's) runs meanwhile and must
-    leave it alone (the worker's own reaper spares its runs whatever their lease)."""
+    leave it alone (the worker's own reaper spares the runs it holds whatever their lease)."""
     short_lease = settings.model_copy(update={"run_lease_seconds": 2})
     run_id = enqueue(db, config={"sleep": 5})
     reaped: list[queue.Reaped] = []
 
     def finished_unreaped() -> bool:
-        reaped.append(queue.reap(db, spare_owner="another-worker"))
+        reaped.append(queue.reap(db))
         return finished(db, run_id)()
 
     with running_worker(short_lease):
