@@ -1,7 +1,8 @@
 """Stage 2: split one accumulated LiDAR cloud into its floor plane and its object points.
 
 Floor: RANSAC plane among planes tilted at most `max_floor_tilt_deg` from the expected up
-direction, refined by least squares on its inliers. Objects: the points clearly above the floor,
+direction, drawn from the cloud's lower envelope and scored against the points below it, refined
+by least squares on its inliers. Objects: the points clearly above the floor,
 grouped by Euclidean clustering (radius graph, connected components); small clusters are dropped.
 """
 
@@ -19,7 +20,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.downsample import voxel_downsample
-from pipeline.geometry import Plane, pack_cells, voxel_keys
+from pipeline.geometry import Plane, pack_cells, tangent_basis, voxel_keys
 from pipeline.surfaces import local_planes
 from pipeline.transforms import Points
 
@@ -56,6 +57,16 @@ class SegmentationConfig(BaseModel):
         gt=0,
         le=90,
         description="floor normal vs the up direction of the initial extrinsics",
+    )
+    floor_cell_m: float = Field(
+        default=0.25,
+        gt=0,
+        description="the floor's hypotheses are drawn from the lowest point of each column of "
+        "this width across the expected up: walls and shelves can fill most of a room's cloud, "
+        "but the bottom of each column is floor or stands on it",
+    )
+    floor_envelope_points: int = Field(
+        default=20_000, ge=3, description="the lowest points are taken among this many random ones"
     )
     min_floor_points: int = Field(
         default=200, ge=3, description="fewer inliers: no floor in this cloud"
@@ -131,6 +142,50 @@ def fit_plane(points: Points) -> tuple[NDArray[np.float64], float, float]:
     return normal, float(-normal @ centroid), rms
 
 
+def lower_envelope(points: Points, up: NDArray[np.float64], cell_m: float) -> NDArray[np.int64]:
+    """Indices of the lowest of the (N, 3) `points` along `up` (3,, unit) in each square cell of
+    edge `cell_m` across it: where walls and shelves fill the view the floor is a small part of
+    a cloud, but the bottom of every column the LiDAR sees is the floor or stands on it."""
+    across = points @ tangent_basis(up)
+    keys = voxel_keys(np.column_stack([across, np.zeros(len(points))]), cell_m, "floor_cell_m")
+    order = np.lexsort((points @ up, keys))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = keys[order[1:]] != keys[order[:-1]]
+    lowest: NDArray[np.int64] = order[first]
+    return lowest
+
+
+def _floor_hypothesis(
+    candidates: Points,
+    scored: Points,
+    up: NDArray[np.float64],
+    *,
+    distance_m: float,
+    iterations: int,
+    max_tilt_deg: float,
+    rng: np.random.Generator,
+) -> tuple[NDArray[np.float64], float] | None:
+    """The best of `iterations` planes through three random `candidates` (M, 3) tilted at most
+    `max_tilt_deg` from `up`, scored on `scored` (S, 3): points within `distance_m`, less the
+    points beyond it below the plane (a LiDAR cannot see below the floor, so every point there
+    tells against it: a shelf top or a plane through the walls has the floor under it)."""
+    samples = candidates[rng.integers(0, len(candidates), size=(iterations, 3))]
+    normals = np.cross(samples[:, 1] - samples[:, 0], samples[:, 2] - samples[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    valid = lengths > 1e-12
+    normals = normals[valid] / lengths[valid, None]
+    normals *= np.sign(normals @ up)[:, None]
+    tilted = normals @ up >= np.cos(np.radians(max_tilt_deg))
+    normals = normals[tilted]
+    if len(normals) == 0:
+        return None
+    offsets = -np.einsum("ij,ij->i", normals, samples[valid][tilted, 0])
+    distances = scored @ normals.T + offsets
+    score = (np.abs(distances) < distance_m).sum(axis=0) - (distances <= -distance_m).sum(axis=0)
+    best = int(np.argmax(score))
+    return normals[best], float(offsets[best])
+
+
 def find_floor(
     points: Points,
     up: NDArray[np.float64],
@@ -142,33 +197,39 @@ def find_floor(
     min_points: int,
     rng: np.random.Generator,
     fit_points: int | None = None,
+    cell_m: float = 0.25,
+    envelope_points: int = 20_000,
+    max_refits: int = 10,
 ) -> tuple[Plane, NDArray[np.bool_], float] | None:
-    """RANSAC for the plane with most inliers whose normal is within `max_tilt_deg` of `up` (3,).
+    """RANSAC for the floor: the plane whose normal is within `max_tilt_deg` of `up` (3,) with
+    most inliers and fewest points below it (see `_floor_hypothesis`), drawn from the lower
+    envelope (`lower_envelope` on `envelope_points` random points, cells of `cell_m`).
 
     Returns the plane refined by least squares (normal oriented along `up`; on at most
-    `fit_points` random inliers when given), the inlier mask over `points` and the inliers' RMS
-    distance; None when no such plane has `min_points` inliers.
+    `fit_points` random inliers when given; refitted until it settles, at most `max_refits`
+    times), the inlier mask over `points` and the inliers' RMS distance; None when no such plane
+    has `min_points` inliers.
     """
     n = len(points)
     if n < max(3, min_points):
         return None
-    samples = points[rng.integers(0, n, size=(iterations, 3))]
-    normals = np.cross(samples[:, 1] - samples[:, 0], samples[:, 2] - samples[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
-    valid = lengths > 1e-12
-    normals = normals[valid] / lengths[valid, None]
-    normals *= np.sign(normals @ up)[:, None]
-    tilted = normals @ up >= np.cos(np.radians(max_tilt_deg))
-    normals = normals[tilted]
-    if len(normals) == 0:
+    sample = points[rng.integers(0, n, size=min(n, envelope_points))]
+    hypothesis = _floor_hypothesis(
+        sample[lower_envelope(sample, up, cell_m)],
+        points[rng.integers(0, n, size=min(n, scored_points))],
+        up,
+        distance_m=distance_m,
+        iterations=iterations,
+        max_tilt_deg=max_tilt_deg,
+        rng=rng,
+    )
+    if hypothesis is None:
         return None
-    offsets = -np.einsum("ij,ij->i", normals, samples[valid][tilted, 0])
-    scored = points[rng.integers(0, n, size=min(n, scored_points))]
-    counts = (np.abs(scored @ normals.T + offsets) < distance_m).sum(axis=0)
-    best = int(np.argmax(counts))
-    normal, offset = normals[best], float(offsets[best])
-    # Two least-squares refits: the first moves the band onto the true floor, the second uses it.
-    for _ in range(2):
+    normal, offset = hypothesis
+    # The envelope's lowest points lie low in the floor's noise: refits move the band onto the
+    # floor's middle (each shrinks that bias about fivefold) until it no longer moves.
+    rms = float("nan")
+    for _ in range(max_refits):
         inliers = np.abs(points @ normal + offset) < distance_m
         index = np.flatnonzero(inliers)
         if len(index) < max(3, min_points):
@@ -176,9 +237,12 @@ def find_floor(
         if fit_points is not None and len(index) > fit_points:
             # The noise averages out long before the last of ~100k inliers.
             index = index[rng.integers(0, len(index), size=fit_points)]
+        previous = offset
         normal, offset, rms = fit_plane(points[index])
         if normal @ up < 0:
             normal, offset = -normal, -offset
+        if abs(offset - previous) < 0.01 * distance_m:
+            break
     inliers = np.abs(points @ normal + offset) < distance_m
     if inliers.sum() < max(3, min_points) or normal @ up < np.cos(np.radians(max_tilt_deg)):
         return None
@@ -248,6 +312,8 @@ def fit_floor(
         min_points=config.min_floor_points,
         rng=np.random.default_rng(config.seed),
         fit_points=config.floor_fit_points,
+        cell_m=config.floor_cell_m,
+        envelope_points=config.floor_envelope_points,
     )
 
 
