@@ -45,7 +45,11 @@ class SegmentationConfig(BaseModel):
         default=20_000, ge=3, description="the floor's least-squares refit uses this many inliers"
     )
     ransac_iterations: int = Field(
-        default=100, ge=1, description="the floor is most of the cloud: 100 draws find it"
+        default=1000,
+        ge=1,
+        description="planes drawn through three of the lowest points (see floor_cell_m); where "
+        "walls and shelves hide most of the floor, a sixth of those columns may be floor, and "
+        "1000 draws hold three of them with 99 % odds (100 draws: 37 %)",
     )
     ransac_scored_points: int = Field(
         default=2000,
@@ -155,7 +159,20 @@ def lower_envelope(points: Points, up: NDArray[np.float64], cell_m: float) -> ND
     return lowest
 
 
-def _floor_hypothesis(
+def _floor_score(
+    points: Points, normals: NDArray[np.float64], offsets: NDArray[np.float64], distance_m: float
+) -> NDArray[np.int64]:
+    """(P,) each plane's points of (N, 3) `points` within `distance_m`, less those beyond it below
+    the plane: a LiDAR cannot see below the floor, so every point there tells against a plane
+    (a shelf top, or a plane through the walls, has the floor under it)."""
+    distances = points @ normals.T + offsets
+    score: NDArray[np.int64] = (np.abs(distances) < distance_m).sum(axis=0) - (
+        distances <= -distance_m
+    ).sum(axis=0)
+    return score
+
+
+def _floor_hypotheses(
     candidates: Points,
     scored: Points,
     up: NDArray[np.float64],
@@ -164,11 +181,10 @@ def _floor_hypothesis(
     iterations: int,
     max_tilt_deg: float,
     rng: np.random.Generator,
-) -> tuple[NDArray[np.float64], float] | None:
-    """The best of `iterations` planes through three random `candidates` (M, 3) tilted at most
-    `max_tilt_deg` from `up`, scored on `scored` (S, 3): points within `distance_m`, less the
-    points beyond it below the plane (a LiDAR cannot see below the floor, so every point there
-    tells against it: a shelf top or a plane through the walls has the floor under it)."""
+    keep: int,
+) -> list[tuple[NDArray[np.float64], float]]:
+    """The `keep` best of `iterations` planes through three random `candidates` (M, 3) tilted at
+    most `max_tilt_deg` from `up`, by `_floor_score` on `scored` (S, 3); best first."""
     samples = candidates[rng.integers(0, len(candidates), size=(iterations, 3))]
     normals = np.cross(samples[:, 1] - samples[:, 0], samples[:, 2] - samples[:, 0])
     lengths = np.linalg.norm(normals, axis=1)
@@ -177,13 +193,42 @@ def _floor_hypothesis(
     normals *= np.sign(normals @ up)[:, None]
     tilted = normals @ up >= np.cos(np.radians(max_tilt_deg))
     normals = normals[tilted]
-    if len(normals) == 0:
-        return None
     offsets = -np.einsum("ij,ij->i", normals, samples[valid][tilted, 0])
-    distances = scored @ normals.T + offsets
-    score = (np.abs(distances) < distance_m).sum(axis=0) - (distances <= -distance_m).sum(axis=0)
-    best = int(np.argmax(score))
-    return normals[best], float(offsets[best])
+    best = np.argsort(-_floor_score(scored, normals, offsets, distance_m), kind="stable")[:keep]
+    return [(normals[i], float(offsets[i])) for i in best]
+
+
+def _refit(
+    points: Points,
+    plane: tuple[NDArray[np.float64], float],
+    up: NDArray[np.float64],
+    *,
+    distance_m: float,
+    min_points: int,
+    fit_points: int | None,
+    max_refits: int,
+    rng: np.random.Generator,
+) -> tuple[NDArray[np.float64], float, float] | None:
+    """`plane` refitted by least squares to its inliers among (N, 3) `points` (on at most
+    `fit_points` random ones), again and again until it moves by less than 1 % of the band (at
+    most `max_refits` times): normal (along `up`), offset and the inliers' RMS distance; None
+    when fewer than `min_points` inliers are left."""
+    normal, offset = plane
+    rms = float("nan")
+    for _ in range(max_refits):
+        index = np.flatnonzero(np.abs(points @ normal + offset) < distance_m)
+        if len(index) < max(3, min_points):
+            return None
+        if fit_points is not None and len(index) > fit_points:
+            # The noise averages out long before the last of ~100k inliers.
+            index = index[rng.integers(0, len(index), size=fit_points)]
+        previous = offset
+        normal, offset, rms = fit_plane(points[index])
+        if normal @ up < 0:
+            normal, offset = -normal, -offset
+        if abs(offset - previous) < 0.01 * distance_m:
+            break
+    return normal, offset, rms
 
 
 def find_floor(
@@ -200,21 +245,22 @@ def find_floor(
     cell_m: float = 0.25,
     envelope_points: int = 20_000,
     max_refits: int = 10,
+    contenders: int = 5,
 ) -> tuple[Plane, NDArray[np.bool_], float] | None:
     """RANSAC for the floor: the plane whose normal is within `max_tilt_deg` of `up` (3,) with
-    most inliers and fewest points below it (see `_floor_hypothesis`), drawn from the lower
-    envelope (`lower_envelope` on `envelope_points` random points, cells of `cell_m`).
+    most inliers and fewest points below it (`_floor_score`), drawn from the lower envelope
+    (`lower_envelope` of `envelope_points` random points, columns of `cell_m`).
 
-    Returns the plane refined by least squares (normal oriented along `up`; on at most
-    `fit_points` random inliers when given; refitted until it settles, at most `max_refits`
-    times), the inlier mask over `points` and the inliers' RMS distance; None when no such plane
-    has `min_points` inliers.
+    The `contenders` best hypotheses (scored on `scored_points` random points) are refitted on
+    the envelope's random points and scored there again; the best is refitted on all `points`
+    (see `_refit`). Returns that plane (normal oriented along `up`), the inlier mask over `points`
+    and the inliers' RMS distance; None when no such plane has `min_points` inliers.
     """
     n = len(points)
     if n < max(3, min_points):
         return None
     sample = points[rng.integers(0, n, size=min(n, envelope_points))]
-    hypothesis = _floor_hypothesis(
+    hypotheses = _floor_hypotheses(
         sample[lower_envelope(sample, up, cell_m)],
         points[rng.integers(0, n, size=min(n, scored_points))],
         up,
@@ -222,27 +268,47 @@ def find_floor(
         iterations=iterations,
         max_tilt_deg=max_tilt_deg,
         rng=rng,
+        keep=contenders,
     )
-    if hypothesis is None:
+    # A floor seen as a narrow strip at the walls' feet is a few % of the cloud: a few dozen of
+    # the scored points, too few to tell it from a plane tilted through it and the feet. The
+    # contenders, each settled on the sample, are told apart on ten times as many.
+    settled = [
+        _refit(
+            sample,
+            plane,
+            up,
+            distance_m=distance_m,
+            min_points=3,
+            fit_points=None,
+            max_refits=max_refits,
+            rng=rng,
+        )
+        for plane in hypotheses
+    ]
+    contending = [plane for plane in settled if plane is not None]
+    if not contending:
         return None
-    normal, offset = hypothesis
-    # The envelope's lowest points lie low in the floor's noise: refits move the band onto the
-    # floor's middle (each shrinks that bias about fivefold) until it no longer moves.
-    rms = float("nan")
-    for _ in range(max_refits):
-        inliers = np.abs(points @ normal + offset) < distance_m
-        index = np.flatnonzero(inliers)
-        if len(index) < max(3, min_points):
-            return None
-        if fit_points is not None and len(index) > fit_points:
-            # The noise averages out long before the last of ~100k inliers.
-            index = index[rng.integers(0, len(index), size=fit_points)]
-        previous = offset
-        normal, offset, rms = fit_plane(points[index])
-        if normal @ up < 0:
-            normal, offset = -normal, -offset
-        if abs(offset - previous) < 0.01 * distance_m:
-            break
+    scores = _floor_score(
+        sample,
+        np.array([normal for normal, _, _ in contending]),
+        np.array([offset for _, offset, _ in contending]),
+        distance_m,
+    )
+    best = contending[int(np.argmax(scores))]
+    refitted = _refit(
+        points,
+        best[:2],
+        up,
+        distance_m=distance_m,
+        min_points=min_points,
+        fit_points=fit_points,
+        max_refits=max_refits,
+        rng=rng,
+    )
+    if refitted is None:
+        return None
+    normal, offset, rms = refitted
     inliers = np.abs(points @ normal + offset) < distance_m
     if inliers.sum() < max(3, min_points) or normal @ up < np.cos(np.radians(max_tilt_deg)):
         return None
