@@ -146,3 +146,28 @@ def test_the_floor_is_not_a_larger_plane_with_the_floor_below_it() -> None:
     assert floor is not None
     assert floor[0][2] > np.cos(np.radians(0.2))
     assert abs(floor[1] - 1.5) < 0.005
+
+
+def test_a_floor_seen_only_as_a_far_strip_is_found_whatever_the_draws() -> None:
+    # Walls 3 m away whose feet are hidden (seen from 0.5 m above the floor up), the floor only
+    # as a strip 2.6-2.9 m away over a quarter turn: 38 of the 169 columns' lowest points.
+    rng = np.random.default_rng(4)
+    room, up = _room(rng, 0)
+    walls = room[room[:, 2] > -1.0]
+    radius, angle = rng.uniform(2.6, 2.9, 400), rng.uniform(0, np.pi / 2, 400)
+    strip = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.full(400, -1.5)])
+    points = np.concatenate([strip, walls])
+    for seed in range(10):
+        found = find_floor(
+            points,
+            up,
+            distance_m=0.02,
+            iterations=SegmentationConfig().ransac_iterations,
+            scored_points=2000,
+            max_tilt_deg=30,
+            min_points=100,
+            rng=np.random.default_rng(seed),
+        )
+        assert found is not None
+        assert found[0].normal[2] > np.cos(np.radians(0.2)), seed
+        assert abs(found[0].offset - 1.5) < 0.005, seed
