@@ -1,7 +1,8 @@
 """Stage 2: split one accumulated LiDAR cloud into its floor plane and its object points.
 
 Floor: RANSAC plane among planes tilted at most `max_floor_tilt_deg` from the expected up
-direction, refined by least squares on its inliers. Objects: the points clearly above the floor,
+direction, drawn from the cloud's lower envelope and scored against the points below it, refined
+by least squares on its inliers. Objects: the points clearly above the floor,
 grouped by Euclidean clustering (radius graph, connected components); small clusters are dropped.
 """
 
@@ -19,7 +20,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.downsample import voxel_downsample
-from pipeline.geometry import Plane, pack_cells, voxel_keys
+from pipeline.geometry import Plane, pack_cells, tangent_basis, voxel_keys
 from pipeline.surfaces import local_planes
 from pipeline.transforms import Points
 
@@ -44,7 +45,11 @@ class SegmentationConfig(BaseModel):
         default=20_000, ge=3, description="the floor's least-squares refit uses this many inliers"
     )
     ransac_iterations: int = Field(
-        default=100, ge=1, description="the floor is most of the cloud: 100 draws find it"
+        default=1000,
+        ge=1,
+        description="planes drawn through three of the lowest points (see floor_cell_m); where "
+        "walls and shelves hide most of the floor, a sixth of those columns may be floor, and "
+        "1000 draws hold three of them with 99 % odds (100 draws: 37 %)",
     )
     ransac_scored_points: int = Field(
         default=2000,
@@ -56,6 +61,16 @@ class SegmentationConfig(BaseModel):
         gt=0,
         le=90,
         description="floor normal vs the up direction of the initial extrinsics",
+    )
+    floor_cell_m: float = Field(
+        default=0.25,
+        gt=0,
+        description="the floor's hypotheses are drawn from the lowest point of each column of "
+        "this width across the expected up: walls and shelves can fill most of a room's cloud, "
+        "but the bottom of each column is floor or stands on it",
+    )
+    floor_envelope_points: int = Field(
+        default=20_000, ge=3, description="the lowest points are taken among this many random ones"
     )
     min_floor_points: int = Field(
         default=200, ge=3, description="fewer inliers: no floor in this cloud"
@@ -131,6 +146,91 @@ def fit_plane(points: Points) -> tuple[NDArray[np.float64], float, float]:
     return normal, float(-normal @ centroid), rms
 
 
+def lower_envelope(points: Points, up: NDArray[np.float64], cell_m: float) -> NDArray[np.int64]:
+    """Indices of the lowest of the (N, 3) `points` along `up` (3,, unit) in each square cell of
+    edge `cell_m` across it: where walls and shelves fill the view the floor is a small part of
+    a cloud, but the bottom of every column the LiDAR sees is the floor or stands on it."""
+    across = points @ tangent_basis(up)
+    keys = voxel_keys(np.column_stack([across, np.zeros(len(points))]), cell_m, "floor_cell_m")
+    order = np.lexsort((points @ up, keys))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = keys[order[1:]] != keys[order[:-1]]
+    lowest: NDArray[np.int64] = order[first]
+    return lowest
+
+
+def _floor_score(
+    points: Points, normals: NDArray[np.float64], offsets: NDArray[np.float64], distance_m: float
+) -> NDArray[np.int64]:
+    """(P,) each plane's points of (N, 3) `points` within `distance_m`, less those beyond it below
+    the plane: a LiDAR cannot see below the floor, so every point there tells against a plane
+    (a shelf top, or a plane through the walls, has the floor under it)."""
+    distances = points @ normals.T + offsets
+    score: NDArray[np.int64] = (np.abs(distances) < distance_m).sum(axis=0) - (
+        distances <= -distance_m
+    ).sum(axis=0)
+    return score
+
+
+def _floor_hypotheses(
+    candidates: Points,
+    scored: Points,
+    up: NDArray[np.float64],
+    *,
+    distance_m: float,
+    iterations: int,
+    max_tilt_deg: float,
+    rng: np.random.Generator,
+    keep: int,
+) -> list[tuple[NDArray[np.float64], float]]:
+    """The `keep` best of `iterations` planes through three random `candidates` (M, 3) tilted at
+    most `max_tilt_deg` from `up`, by `_floor_score` on `scored` (S, 3); best first."""
+    samples = candidates[rng.integers(0, len(candidates), size=(iterations, 3))]
+    normals = np.cross(samples[:, 1] - samples[:, 0], samples[:, 2] - samples[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    valid = lengths > 1e-12
+    normals = normals[valid] / lengths[valid, None]
+    normals *= np.sign(normals @ up)[:, None]
+    tilted = normals @ up >= np.cos(np.radians(max_tilt_deg))
+    normals = normals[tilted]
+    offsets = -np.einsum("ij,ij->i", normals, samples[valid][tilted, 0])
+    best = np.argsort(-_floor_score(scored, normals, offsets, distance_m), kind="stable")[:keep]
+    return [(normals[i], float(offsets[i])) for i in best]
+
+
+def _refit(
+    points: Points,
+    plane: tuple[NDArray[np.float64], float],
+    up: NDArray[np.float64],
+    *,
+    distance_m: float,
+    min_points: int,
+    fit_points: int | None,
+    max_refits: int,
+    rng: np.random.Generator,
+) -> tuple[NDArray[np.float64], float, float] | None:
+    """`plane` refitted by least squares to its inliers among (N, 3) `points` (on at most
+    `fit_points` random ones), again and again until it moves by less than 1 % of the band (at
+    most `max_refits` times): normal (along `up`), offset and the inliers' RMS distance; None
+    when fewer than `min_points` inliers are left."""
+    normal, offset = plane
+    rms = float("nan")
+    for _ in range(max_refits):
+        index = np.flatnonzero(np.abs(points @ normal + offset) < distance_m)
+        if len(index) < max(3, min_points):
+            return None
+        if fit_points is not None and len(index) > fit_points:
+            # The noise averages out long before the last of ~100k inliers.
+            index = index[rng.integers(0, len(index), size=fit_points)]
+        previous = offset
+        normal, offset, rms = fit_plane(points[index])
+        if normal @ up < 0:
+            normal, offset = -normal, -offset
+        if abs(offset - previous) < 0.01 * distance_m:
+            break
+    return normal, offset, rms
+
+
 def find_floor(
     points: Points,
     up: NDArray[np.float64],
@@ -142,43 +242,73 @@ def find_floor(
     min_points: int,
     rng: np.random.Generator,
     fit_points: int | None = None,
+    cell_m: float = 0.25,
+    envelope_points: int = 20_000,
+    max_refits: int = 10,
+    contenders: int = 5,
 ) -> tuple[Plane, NDArray[np.bool_], float] | None:
-    """RANSAC for the plane with most inliers whose normal is within `max_tilt_deg` of `up` (3,).
+    """RANSAC for the floor: the plane whose normal is within `max_tilt_deg` of `up` (3,) with
+    most inliers and fewest points below it (`_floor_score`), drawn from the lower envelope
+    (`lower_envelope` of `envelope_points` random points, columns of `cell_m`).
 
-    Returns the plane refined by least squares (normal oriented along `up`; on at most
-    `fit_points` random inliers when given), the inlier mask over `points` and the inliers' RMS
-    distance; None when no such plane has `min_points` inliers.
+    The `contenders` best hypotheses (scored on `scored_points` random points) are refitted on
+    the envelope's random points and scored there again; the best is refitted on all `points`
+    (see `_refit`). Returns that plane (normal oriented along `up`), the inlier mask over `points`
+    and the inliers' RMS distance; None when no such plane has `min_points` inliers.
     """
     n = len(points)
     if n < max(3, min_points):
         return None
-    samples = points[rng.integers(0, n, size=(iterations, 3))]
-    normals = np.cross(samples[:, 1] - samples[:, 0], samples[:, 2] - samples[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
-    valid = lengths > 1e-12
-    normals = normals[valid] / lengths[valid, None]
-    normals *= np.sign(normals @ up)[:, None]
-    tilted = normals @ up >= np.cos(np.radians(max_tilt_deg))
-    normals = normals[tilted]
-    if len(normals) == 0:
+    sample = points[rng.integers(0, n, size=min(n, envelope_points))]
+    hypotheses = _floor_hypotheses(
+        sample[lower_envelope(sample, up, cell_m)],
+        points[rng.integers(0, n, size=min(n, scored_points))],
+        up,
+        distance_m=distance_m,
+        iterations=iterations,
+        max_tilt_deg=max_tilt_deg,
+        rng=rng,
+        keep=contenders,
+    )
+    # A floor seen as a narrow strip at the walls' feet is a few % of the cloud: a few dozen of
+    # the scored points, too few to tell it from a plane tilted through it and the feet. The
+    # contenders, each settled on the sample, are told apart on ten times as many.
+    settled = [
+        _refit(
+            sample,
+            plane,
+            up,
+            distance_m=distance_m,
+            min_points=3,
+            fit_points=None,
+            max_refits=max_refits,
+            rng=rng,
+        )
+        for plane in hypotheses
+    ]
+    contending = [plane for plane in settled if plane is not None]
+    if not contending:
         return None
-    offsets = -np.einsum("ij,ij->i", normals, samples[valid][tilted, 0])
-    scored = points[rng.integers(0, n, size=min(n, scored_points))]
-    counts = (np.abs(scored @ normals.T + offsets) < distance_m).sum(axis=0)
-    best = int(np.argmax(counts))
-    normal, offset = normals[best], float(offsets[best])
-    # Two least-squares refits: the first moves the band onto the true floor, the second uses it.
-    for _ in range(2):
-        inliers = np.abs(points @ normal + offset) < distance_m
-        index = np.flatnonzero(inliers)
-        if len(index) < max(3, min_points):
-            return None
-        if fit_points is not None and len(index) > fit_points:
-            # The noise averages out long before the last of ~100k inliers.
-            index = index[rng.integers(0, len(index), size=fit_points)]
-        normal, offset, rms = fit_plane(points[index])
-        if normal @ up < 0:
-            normal, offset = -normal, -offset
+    scores = _floor_score(
+        sample,
+        np.array([normal for normal, _, _ in contending]),
+        np.array([offset for _, offset, _ in contending]),
+        distance_m,
+    )
+    best = contending[int(np.argmax(scores))]
+    refitted = _refit(
+        points,
+        best[:2],
+        up,
+        distance_m=distance_m,
+        min_points=min_points,
+        fit_points=fit_points,
+        max_refits=max_refits,
+        rng=rng,
+    )
+    if refitted is None:
+        return None
+    normal, offset, rms = refitted
     inliers = np.abs(points @ normal + offset) < distance_m
     if inliers.sum() < max(3, min_points) or normal @ up < np.cos(np.radians(max_tilt_deg)):
         return None
@@ -248,6 +378,8 @@ def fit_floor(
         min_points=config.min_floor_points,
         rng=np.random.default_rng(config.seed),
         fit_points=config.floor_fit_points,
+        cell_m=config.floor_cell_m,
+        envelope_points=config.floor_envelope_points,
     )
 
 

@@ -91,3 +91,83 @@ def test_a_floor_fitted_beforehand_gives_the_same_segmentation() -> None:
     np.testing.assert_array_equal(given.object_points, own.object_points)
     assert given.floor_inliers == own.floor_inliers
     assert segment_on_floor(cloud, config, None).object_points.shape == (0, 3)
+
+
+def _room(rng: np.random.Generator, floor_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """A sensor 1.5 m above the floor (z = -1.5) in a 6 m square room with 2 m tall walls: the
+    floor (a disc of 1.5 m radius, as much as the walls and shelves leave in view) first, then
+    8000 wall points. And the up direction of initial extrinsics 10 deg off the true one."""
+    radius, angle = 1.5 * np.sqrt(rng.uniform(size=floor_points)), rng.uniform(0, 6.3, floor_points)
+    floor = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), -1.5 + 0 * angle])
+    along, height = rng.uniform(-3, 3, 8000), rng.uniform(-1.5, 0.5, 8000)
+    side = rng.integers(0, 4, 8000)
+    wall = np.column_stack([along, np.full(8000, 3.0), height])
+    for quarter in range(1, 4):  # the other three walls: the first turned about z
+        c, s = np.cos(quarter * np.pi / 2), np.sin(quarter * np.pi / 2)
+        turned = wall[side == quarter]
+        wall[side == quarter, :2] = turned[:, :2] @ np.array([[c, s], [-s, c]])
+    up = np.array([np.sin(np.radians(10)), 0.0, np.cos(np.radians(10))])
+    return np.concatenate([floor, wall]), up
+
+
+def _floor_of(points: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, float] | None:
+    found = find_floor(
+        points,
+        up,
+        distance_m=0.02,
+        iterations=100,
+        scored_points=2000,
+        max_tilt_deg=30,
+        min_points=100,
+        rng=np.random.default_rng(0),
+    )
+    return None if found is None else (found[0].normal, found[0].offset)
+
+
+def test_the_floor_is_found_where_walls_fill_most_of_the_cloud() -> None:
+    # 600 floor points among 8600: three random points are all floor once in 3000 draws; the
+    # lowest points of the columns across up are mostly floor (the walls stand on it).
+    points, up = _room(np.random.default_rng(2), 600)
+    floor = _floor_of(points, up)
+    assert floor is not None
+    assert floor[0][2] > np.cos(np.radians(0.2))
+    assert abs(floor[1] - 1.5) < 0.005
+
+
+def test_the_floor_is_not_a_larger_plane_with_the_floor_below_it() -> None:
+    # A long shelf top along a wall, 0.5 m above the floor, with more points than the floor in
+    # view and a third of the columns: the floor lies below it, which no LiDAR could see were
+    # the shelf top the floor.
+    rng = np.random.default_rng(3)
+    room, up = _room(rng, 600)
+    top = rng.uniform([1.6, -2.9], [2.9, 2.9], (2000, 2))
+    shelf = np.column_stack([top, np.full(2000, -1.0)])
+    floor = _floor_of(np.concatenate([room, shelf]), up)
+    assert floor is not None
+    assert floor[0][2] > np.cos(np.radians(0.2))
+    assert abs(floor[1] - 1.5) < 0.005
+
+
+def test_a_floor_seen_only_as_a_far_strip_is_found_whatever_the_draws() -> None:
+    # Walls 3 m away whose feet are hidden (seen from 0.5 m above the floor up), the floor only
+    # as a strip 2.6-2.9 m away over a quarter turn: 38 of the 169 columns' lowest points.
+    rng = np.random.default_rng(4)
+    room, up = _room(rng, 0)
+    walls = room[room[:, 2] > -1.0]
+    radius, angle = rng.uniform(2.6, 2.9, 400), rng.uniform(0, np.pi / 2, 400)
+    strip = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.full(400, -1.5)])
+    points = np.concatenate([strip, walls])
+    for seed in range(10):
+        found = find_floor(
+            points,
+            up,
+            distance_m=0.02,
+            iterations=SegmentationConfig().ransac_iterations,
+            scored_points=2000,
+            max_tilt_deg=30,
+            min_points=100,
+            rng=np.random.default_rng(seed),
+        )
+        assert found is not None
+        assert found[0].normal[2] > np.cos(np.radians(0.2)), seed
+        assert abs(found[0].offset - 1.5) < 0.005, seed
