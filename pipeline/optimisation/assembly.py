@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.geometry import voxel_keys
 from pipeline.optimisation.association import Pairs
 from pipeline.optimisation.objective import JointObjective
 from pipeline.optimisation.residuals import (
@@ -28,10 +29,11 @@ def normal_equations(
     *,
     ideal_floor: bool = False,
     floor_stop: int | None = None,
+    with_floor: bool = True,
 ) -> NormalEquations:
     """H = J^T W J, b = J^T W r (weights in 1/sigma^2), the weighted squared residual sum
     and the number of residual rows. `ideal_floor`: see `residuals.floor_terms`; `floor_stop`:
-    only that stop's floor terms (None: every stop's)."""
+    only that stop's floor terms (None: every stop's); `with_floor` False: the point pairs alone."""
     layout = objective.layout
     H = np.zeros((layout.size, layout.size))
     b = np.zeros(layout.size)
@@ -46,7 +48,7 @@ def normal_equations(
     _add_point_groups(H, b, objective, key, jac, weight, residual)
     chi2 = float(np.sum(weight[:, None] * residual**2))
     count = residual.size
-    if objective.floor:
+    if objective.floor and with_floor:
         floor_residual, floor_jac = floor_terms(
             objective, T_G_ref, T_ref_lidar, jacobians=True, ideal=ideal_floor
         )
@@ -143,3 +145,94 @@ def stop_contributions(
             objective, subset, stops, lidars, scale, ideal_floor=True, floor_stop=j
         )
     return H, b
+
+
+def block_contributions(
+    objective: JointObjective,
+    pairs: Pairs,
+    stops: NDArray[np.float64],
+    lidars: NDArray[np.float64],
+    scale: float,
+    block_m: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per block of space, the information (B, P, P) and gradient (B, P) of the point pairs
+    whose target lies in it: cubic cells of edge `block_m` in G, one per occupied cell.
+
+    Neighbouring pairs share their surface fit, so their residuals are correlated and a
+    jackknife over stops cannot see a misfit every stop repeats; leaving out a block of space
+    removes a correlated patch whole. The floor terms stay in every block's complement.
+    """
+    layout = objective.layout
+    placed = objective.place(stops, lidars)
+    key = voxel_keys(placed.reference_G[pairs.target], block_m, "optimisation.uncertainty_block_m")
+    blocks, block_of = np.unique(key, return_inverse=True)
+    H = np.zeros((len(blocks), layout.size, layout.size))
+    b = np.zeros((len(blocks), layout.size))
+    order = np.argsort(block_of, kind="stable")
+    bounds = np.searchsorted(block_of[order], np.arange(len(blocks) + 1))
+    for c in range(len(blocks)):
+        rows = order[bounds[c] : bounds[c + 1]]
+        subset = Pairs(pairs.source[rows], pairs.target[rows], pairs.cross_error)
+        H[c], b[c], _, _ = normal_equations(
+            objective, subset, stops, lidars, scale, with_floor=False
+        )
+    return H, b
+
+
+def _rays_G(
+    clouds_points: NDArray[np.float64],
+    lidar_of: NDArray[np.int64],
+    stop_of: NDArray[np.int64],
+    stops: NDArray[np.float64],
+    lidars: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """(N, 3) each point's unit ray direction (from its LiDAR, points (N, 3) in that LiDAR's
+    frame), in G."""
+    rays = clouds_points / np.maximum(np.linalg.norm(clouds_points, axis=1, keepdims=True), 1e-12)
+    R_G_lidar = (stops[:, None, :3, :3] @ lidars[None, :, :3, :3])[stop_of, lidar_of]
+    result: NDArray[np.float64] = np.einsum("nij,nj->ni", R_G_lidar, rays)
+    return result
+
+
+def range_bias_terms(
+    objective: JointObjective,
+    pairs: Pairs,
+    stops: NDArray[np.float64],
+    lidars: NDArray[np.float64],
+    scale: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The normal equations' terms of a range bias per LiDAR (beta_i: every point of LiDAR i
+    moved along its ray by the same length), at fixed pairs: `J^T W dr/dbeta` (L, P) between
+    the poses and each bias, `dr/dbeta^T W dr/dbeta` (L, L) among the biases, and
+    `dr/dbeta^T W r` (L,), the cost's gradient by them. The floor terms are left out: they fix
+    height, roll and pitch, and a floor plane a range bias moves stays a plane."""
+    layout = objective.layout
+    placed = objective.place(stops, lidars)
+    sorted_pairs, key = _grouped(objective, pairs)
+    residual = point_residuals(objective.config.residual, sorted_pairs, placed)
+    weight, _ = robust_weight_and_cost(
+        np.linalg.norm(residual, axis=1), scale, objective.config.robust_loss
+    )
+    weight = weight / objective.config.point_sigma_m**2
+    jac = point_jacobians(objective, sorted_pairs, placed, stops)
+    src, tgt = objective.sources, objective.reference
+    u_src = _rays_G(src.points, src.lidar, src.stop, stops, lidars)[sorted_pairs.source]
+    u_tgt = _rays_G(tgt.points, tgt.lidar, tgt.stop, stops, lidars)[sorted_pairs.target]
+    if objective.config.residual == "point_to_plane":
+        normals = placed.normals_G[sorted_pairs.target]
+        u_src = np.einsum("ni,ni->n", normals, u_src)[:, None]
+        u_tgt = np.einsum("ni,ni->n", normals, u_tgt)[:, None]
+    source_lidar = src.lidar[sorted_pairs.source]
+    target_lidar = tgt.lidar[sorted_pairs.target]
+    cross = np.zeros((layout.n_lidars, layout.size))
+    scratch = np.zeros((layout.size, layout.size))
+    derivatives = []
+    for i in range(layout.n_lidars):
+        # A pair of LiDAR i's own map moves at both ends; the two terms then cancel along the
+        # normal only where the rays are parallel.
+        d_residual = u_src * (source_lidar == i)[:, None] - u_tgt * (target_lidar == i)[:, None]
+        derivatives.append(d_residual.reshape(-1))
+        _add_point_groups(scratch, cross[i], objective, key, jac, weight, d_residual)
+    d_rows = np.stack(derivatives)  # (L, residual rows)
+    weighted = d_rows * np.repeat(weight, residual.shape[1])[None, :]
+    return cross, weighted @ d_rows.T, weighted @ residual.reshape(-1)

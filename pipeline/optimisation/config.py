@@ -89,4 +89,11 @@ class OptimisationConfig(BaseModel):
     initial_damping: float = Field(
         default=1e-4, ge=0, description="Levenberg-Marquardt lambda at start"
     )
+    uncertainty_block_m: float = Field(
+        default=0.5,
+        gt=0,
+        description="edge of the cubic blocks of space (in G) that the leave-one-block-out "
+        "jackknife leaves out in turn: larger than a surface fit's patch (the correlation length "
+        "of the residuals), about the size of an object",
+    )
     seed: int = 0

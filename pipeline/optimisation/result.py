@@ -21,6 +21,12 @@ class OptimisationResult:
     `gradient` (P,) J^T W r there; `stop_information` (J, P, P) and `stop_gradient` (J, P): the
     parts of both that come from the residuals touching each stop (its points as source or as
     target, its floor planes), for a leave-one-stop-out jackknife (`pipeline.observability`);
+    `block_information` (B, P, P) and `block_gradient` (B, P): the same for the point pairs
+    whose target lies in each occupied block of space (`uncertainty_block_m`), for a
+    leave-one-block-out jackknife; `range_bias_cross` (L, P), `range_bias_information` (L, L)
+    and `range_bias_gradient` (L,): the normal equations' terms of a range bias per LiDAR (its
+    points moved along their rays; `assembly.range_bias_terms`), from which the observability
+    stage estimates each LiDAR's range bias and what it does to the poses;
     `variance_factor`: a-posteriori sum of weighted squared residuals over the redundancy.
     """
 
@@ -34,6 +40,11 @@ class OptimisationResult:
     gradient: NDArray[np.float64]
     stop_information: NDArray[np.float64]
     stop_gradient: NDArray[np.float64]
+    block_information: NDArray[np.float64]
+    block_gradient: NDArray[np.float64]
+    range_bias_cross: NDArray[np.float64]
+    range_bias_information: NDArray[np.float64]
+    range_bias_gradient: NDArray[np.float64]
     variance_factor: float
     layout: ParameterLayout
     correspondences: tuple[int, ...]

@@ -11,7 +11,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.geometry import Plane, exp_se3
-from pipeline.optimisation.assembly import normal_equations, stop_contributions
+from pipeline.optimisation.assembly import (
+    block_contributions,
+    normal_equations,
+    range_bias_terms,
+    stop_contributions,
+)
 from pipeline.optimisation.association import Pairs, associate
 from pipeline.optimisation.config import OptimisationConfig
 from pipeline.optimisation.layout import ParameterLayout
@@ -149,6 +154,12 @@ def _result(objective: JointObjective, run: _Run, started: float) -> Optimisatio
             objective, pairs, stops, lidars, run.scale, ideal_floor=True
         )
     stop_H, stop_b = stop_contributions(objective, pairs, stops, lidars, run.scale)
+    block_H, block_b = block_contributions(
+        objective, pairs, stops, lidars, run.scale, objective.config.uncertainty_block_m
+    )
+    bias_cross, bias_information, bias_gradient = range_bias_terms(
+        objective, pairs, stops, lidars, run.scale
+    )
     redundancy = max(count - layout.size, 1)
     residual_rms = float("nan")
     if len(pairs.source):
@@ -166,6 +177,11 @@ def _result(objective: JointObjective, run: _Run, started: float) -> Optimisatio
         gradient=gradient,
         stop_information=stop_H,
         stop_gradient=stop_b,
+        block_information=block_H,
+        block_gradient=block_b,
+        range_bias_cross=bias_cross,
+        range_bias_information=bias_information,
+        range_bias_gradient=bias_gradient,
         variance_factor=chi2 / redundancy,
         layout=layout,
         correspondences=tuple(int(c) for c in per_lidar),

@@ -134,6 +134,7 @@ CONFIG_METHODS = (
     "with_stage1",
     "without_stage1",
     "without_moving_points",
+    "range_bias_estimated",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -149,6 +150,8 @@ def method_config(method: str) -> PipelineConfig:
         data["denoise"]["enabled"] = method == "with_stage1"
     elif method == "without_moving_points":
         data["moving_points"]["enabled"] = False
+    elif method == "range_bias_estimated":
+        data["observability"]["range_bias"] = "estimated"
     elif method != "proposed":
         raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
     return config_from_mapping(data)

@@ -1,9 +1,16 @@
+import dataclasses
+
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.calibrate import calibrate
 from pipeline.config import PipelineConfig
-from pipeline.observability import ObservabilityConfig, jackknife_covariance, level_rotation
+from pipeline.observability import (
+    ObservabilityConfig,
+    block_jackknife_covariance,
+    jackknife_covariance,
+    level_rotation,
+)
 from pipeline.optimisation import OptimisationResult, ParameterLayout
 from tests.pipeline.calibration_data import box_calibration, box_problem, floor_only_calibration
 
@@ -67,6 +74,11 @@ def test_the_jackknife_is_exact_leave_one_stop_out_on_a_linear_problem() -> None
         gradient=b_j.sum(axis=0),
         stop_information=H_j,
         stop_gradient=b_j,
+        block_information=np.zeros((0, size, size)),
+        block_gradient=np.zeros((0, size)),
+        range_bias_cross=np.zeros((layout.n_lidars, size)),
+        range_bias_information=np.zeros((layout.n_lidars, layout.n_lidars)),
+        range_bias_gradient=np.zeros(layout.n_lidars),
         variance_factor=1.0,
         layout=layout,
         correspondences=(0, 0),
@@ -86,6 +98,14 @@ def test_the_jackknife_is_exact_leave_one_stop_out_on_a_linear_problem() -> None
     covariance = jackknife_covariance(result, prior)
     assert covariance is not None
     np.testing.assert_allclose(covariance, expected, rtol=1e-8, atol=1e-12)
+    # Leaving out blocks of space is the same computation over other parts: with the stops'
+    # parts as the blocks it must agree, and with fewer than three parts there is none.
+    as_blocks = dataclasses.replace(result, block_information=H_j, block_gradient=b_j)
+    block = block_jackknife_covariance(as_blocks, prior)
+    assert block is not None
+    np.testing.assert_allclose(block, expected, rtol=1e-8, atol=1e-12)
+    two = dataclasses.replace(result, block_information=H_j[:2], block_gradient=b_j[:2])
+    assert block_jackknife_covariance(two, prior) is None
 
 
 def test_reported_stddev_come_from_the_jackknife_never_below_the_formal_ones() -> None:
@@ -110,3 +130,22 @@ def test_reported_stddev_come_from_the_jackknife_never_below_the_formal_ones() -
         assert measured.uncertainty.undetermined == formal.uncertainty.undetermined
     # The residuals of a surface patch are correlated: the data's own spread is wider.
     assert wider == len(results[0].lidars) - 1
+
+
+def test_an_estimated_range_bias_only_ever_widens_the_reported_stddev() -> None:
+    result = box_calibration()
+    problem, _ = box_problem()
+    estimated = calibrate(
+        problem, PipelineConfig(observability=ObservabilityConfig(range_bias="estimated"))
+    )
+    for plain, wider in zip(result.lidars[1:], estimated.lidars[1:], strict=True):
+        assert np.all(
+            wider.uncertainty.stddev_translation_m >= plain.uncertainty.stddev_translation_m
+        )
+        assert np.all(
+            wider.uncertainty.stddev_rotation_deg >= plain.uncertainty.stddev_rotation_deg
+        )
+        # On this recording the common-mode estimate is far off (see ObservabilityConfig).
+        assert max(wider.uncertainty.stddev_translation_m) > max(
+            plain.uncertainty.stddev_translation_m
+        )

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from pipeline.optimisation import OptimisationConfig, ResidualKind
-from pipeline.optimisation.assembly import normal_equations
+from pipeline.optimisation.assembly import block_contributions, normal_equations
 from pipeline.optimisation.association import associate
 from pipeline.optimisation.objective import JointObjective
 from pipeline.optimisation.residuals import cost
@@ -32,3 +32,25 @@ def test_normal_equations_hold_the_cost_gradient(residual: ResidualKind, every_l
         minus = cost(objective, pairs, *apply_step(-step, objective.layout, stops, lidars), scale)
         numeric[k] = (plus - minus) / 2e-6
     assert np.max(np.abs(numeric - gradient)) < 1e-5 * np.max(np.abs(gradient))
+
+
+@pytest.mark.parametrize("block_m", [0.2, 1.0])
+def test_the_blocks_of_space_partition_the_point_pairs(block_m: float) -> None:
+    # Every pair falls in exactly one block: without floor terms the blocks' information and
+    # gradients add up to the whole problem's, and a finer grid gives more blocks.
+    inputs = stage_inputs()
+    rough = inputs.rough
+    config = OptimisationConfig(max_points_per_cloud=200)
+    objective = JointObjective.build(
+        inputs.objects, inputs.planes, rough.floor_G, len(rough.T_G_ref), config, inputs.normals
+    )
+    stops, lidars, scale = rough.T_G_ref, rough.T_ref_lidar, 0.05
+    pairs = associate(objective, objective.place(stops, lidars))
+    H, b, _, _ = normal_equations(objective, pairs, stops, lidars, scale, with_floor=False)
+    block_H, block_b = block_contributions(objective, pairs, stops, lidars, scale, block_m)
+    assert len(block_H) >= 3
+    np.testing.assert_allclose(block_H.sum(axis=0), H, rtol=1e-9, atol=1e-6 * np.abs(H).max())
+    np.testing.assert_allclose(block_b.sum(axis=0), b, rtol=1e-9, atol=1e-6 * np.abs(b).max())
+    if block_m < 1.0:
+        coarse, _ = block_contributions(objective, pairs, stops, lidars, scale, 1.0)
+        assert len(block_H) > len(coarse)
