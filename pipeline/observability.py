@@ -156,6 +156,8 @@ def range_bias_estimate(
     -[b; e]` with the terms of `assembly.range_bias_terms`, the weak prior of a translation on
     each bias. The 1-sigma is formal (the same system's inverse, a-posteriori variance)."""
     size, n_lidars = result.layout.size, result.layout.n_lidars
+    if len(result.range_bias_cross) != n_lidars:
+        raise ValueError("the optimisation ran without range_bias=True: no range-bias terms")
     bias_prior = np.full(n_lidars, 1.0 / config.prior_translation_m**2)
     C = result.range_bias_cross.T  # (P, L)
     system = np.block(

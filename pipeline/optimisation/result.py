@@ -26,7 +26,8 @@ class OptimisationResult:
     leave-one-block-out jackknife; `range_bias_cross` (L, P), `range_bias_information` (L, L)
     and `range_bias_gradient` (L,): the normal equations' terms of a range bias per LiDAR (its
     points moved along their rays; `assembly.range_bias_terms`), from which the observability
-    stage estimates each LiDAR's range bias and what it does to the poses;
+    stage estimates each LiDAR's range bias and what it does to the poses (empty, 0 rows, unless
+    `optimise(range_bias=True)`);
     `variance_factor`: a-posteriori sum of weighted squared residuals over the redundancy.
     """
 

@@ -36,6 +36,7 @@ def optimise(
     floor_G: Plane | None = None,
     normals: Sequence[Sequence[Points]] | None = None,
     on_iteration: Callable[[int], None] | None = None,
+    range_bias: bool = False,
 ) -> OptimisationResult:
     """Refine the poses so every LiDAR's object map agrees with the reference LiDAR's.
 
@@ -46,6 +47,8 @@ def optimise(
     `normals[lidar][stop]` (N, 3): the points' surface normals when the caller has them
     (segmentation does); without them they are fitted here, and the clouds smoothed if
     `smooth_clouds`. `on_iteration(k)` is called after iteration k (progress for a caller).
+    `range_bias`: also return the terms of a range bias per LiDAR (`assembly.range_bias_terms`,
+    for `observability.range_bias: estimated`); without it they are empty (0 LiDARs' worth).
     """
     started = time.perf_counter()
     phases = _phases(objects, planes, floor_G, len(T_G_ref), config, normals)
@@ -59,7 +62,7 @@ def optimise(
     )
     for phase, objective in enumerate(phases):
         _iterate(run, objective, config, last=phase == len(phases) - 1, on_iteration=on_iteration)
-    return _result(phases[-1], run, started)
+    return _result(phases[-1], run, started, range_bias)
 
 
 def _phases(
@@ -140,7 +143,9 @@ def _iterate(
             break
 
 
-def _result(objective: JointObjective, run: _Run, started: float) -> OptimisationResult:
+def _result(
+    objective: JointObjective, run: _Run, started: float, range_bias: bool
+) -> OptimisationResult:
     """The result at the final poses, with the final phase's associations there: the
     information matrix, the per-stop parts of it and the variance factor."""
     layout, stops, lidars = objective.layout, run.stops, run.lidars
@@ -157,8 +162,10 @@ def _result(objective: JointObjective, run: _Run, started: float) -> Optimisatio
     block_H, block_b = block_contributions(
         objective, pairs, stops, lidars, run.scale, objective.config.uncertainty_block_m
     )
-    bias_cross, bias_information, bias_gradient = range_bias_terms(
-        objective, pairs, stops, lidars, run.scale
+    bias_cross, bias_information, bias_gradient = (
+        range_bias_terms(objective, pairs, stops, lidars, run.scale)
+        if range_bias
+        else (np.zeros((0, layout.size)), np.zeros((0, 0)), np.zeros(0))
     )
     redundancy = max(count - layout.size, 1)
     residual_rms = float("nan")

@@ -32,6 +32,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         on_iteration=None
         if on_iteration is None
         else partial(_iteration_of, on_iteration, config.optimisation.max_iterations),
+        range_bias=config.observability.range_bias == "estimated",
     )
     details: dict[str, Detail] = {
         "iterations": result.iterations,

@@ -53,6 +53,7 @@ def test_a_range_bias_moves_the_solution_as_its_gradient_predicts() -> None:
             planes=inputs.planes,
             floor_G=rough.floor_G,
             normals=inputs.normals,
+            range_bias=True,
         )
 
     base = solve(inputs.objects)
