@@ -231,6 +231,47 @@ def _refit(
     return normal, offset, rms
 
 
+def _best_contender(
+    sample: Points,
+    hypotheses: list[tuple[NDArray[np.float64], float]],
+    up: NDArray[np.float64],
+    *,
+    distance_m: float,
+    max_refits: int,
+    rng: np.random.Generator,
+) -> tuple[NDArray[np.float64], float] | None:
+    """The best of the `hypotheses` once each is settled on `sample` (`_refit`) and scored there
+    again (`_floor_score`): normal and offset; None when none keeps three inliers.
+
+    A floor seen as a narrow strip at the walls' feet is a few % of the cloud: a few dozen of
+    the scored points, too few to tell it from a plane tilted through it and the feet. The
+    contenders, each settled on the sample, are told apart on ten times as many."""
+    settled = [
+        _refit(
+            sample,
+            plane,
+            up,
+            distance_m=distance_m,
+            min_points=3,
+            fit_points=None,
+            max_refits=max_refits,
+            rng=rng,
+        )
+        for plane in hypotheses
+    ]
+    contending = [plane for plane in settled if plane is not None]
+    if not contending:
+        return None
+    scores = _floor_score(
+        sample,
+        np.array([normal for normal, _, _ in contending]),
+        np.array([offset for _, offset, _ in contending]),
+        distance_m,
+    )
+    normal, offset, _ = contending[int(np.argmax(scores))]
+    return normal, offset
+
+
 def find_floor(
     points: Points,
     up: NDArray[np.float64],
@@ -270,35 +311,14 @@ def find_floor(
         rng=rng,
         keep=contenders,
     )
-    # A floor seen as a narrow strip at the walls' feet is a few % of the cloud: a few dozen of
-    # the scored points, too few to tell it from a plane tilted through it and the feet. The
-    # contenders, each settled on the sample, are told apart on ten times as many.
-    settled = [
-        _refit(
-            sample,
-            plane,
-            up,
-            distance_m=distance_m,
-            min_points=3,
-            fit_points=None,
-            max_refits=max_refits,
-            rng=rng,
-        )
-        for plane in hypotheses
-    ]
-    contending = [plane for plane in settled if plane is not None]
-    if not contending:
-        return None
-    scores = _floor_score(
-        sample,
-        np.array([normal for normal, _, _ in contending]),
-        np.array([offset for _, offset, _ in contending]),
-        distance_m,
+    best = _best_contender(
+        sample, hypotheses, up, distance_m=distance_m, max_refits=max_refits, rng=rng
     )
-    best = contending[int(np.argmax(scores))]
+    if best is None:
+        return None
     refitted = _refit(
         points,
-        best[:2],
+        best,
         up,
         distance_m=distance_m,
         min_points=min_points,
