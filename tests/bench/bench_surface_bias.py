@@ -287,7 +287,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--synthetic-only", action="store_true")
     parser.add_argument(
-        "--surface-model", choices=["quadric", "plane"], default=None
+        "--surface-model", choices=["quadric", "plane", "beam_quadric"], default=None
     )
     args = parser.parse_args(argv)
     from tests.bench.bench_random import parse_seeds
