@@ -3,7 +3,7 @@ of each point behind the object surface it belongs to, raw and smoothed.
 
     .venv/bin/python -m tests.bench.bench_surface_bias [--seeds 1000,1013]
         [--recordings /tmp/honest/cache/recordings/rate-0.3] [--synthetic-only]
-        [--surface-model quadric|plane]
+        [--surface-model quadric|plane|beam_quadric] [--cases spinning set1-box]
 
 For each seed, the recording `RECORDINGS/seed-N/recording` is read and taken through the
 pipeline's stages up to segmentation (moving points, stage 1) with the default config; each
@@ -16,8 +16,10 @@ bias would do. `behind` is the same along the true normal (`ray * |cos|`). Point
 meets no object within 0.15 m of them (beyond a silhouette, the floor's edge) are left out and
 counted as missed.
 
-A synthetic case (one cylinder, one box face, seen by one sensor over repeated scans with given
-range noise, segmented by the same `segment_on_floor`) is measured the same way.
+`--cases` measures bench_calibration's fixed scenarios the same way (synthesised in memory,
+seeds 0 to `--case-seeds` - 1). A synthetic case (one cylinder, one box face, seen by one
+sensor over repeated scans with given range noise, segmented by the same `segment_on_floor`)
+is measured the same way.
 """
 
 from __future__ import annotations
@@ -37,8 +39,10 @@ from numpy.typing import NDArray  # noqa: E402
 
 from pipeline.config import PipelineConfig  # noqa: E402
 from pipeline.geometry import Plane  # noqa: E402
+from pipeline.problem import CalibrationProblem  # noqa: E402
 from pipeline.segmentation import FloorFit, SegmentationConfig, segment_on_floor  # noqa: E402
 from pipeline.synth.objects import ObjectKind, SceneObject  # noqa: E402
+from pipeline.synth.truth import Truth  # noqa: E402
 from pipeline.transforms import Matrix4, make_transform  # noqa: E402
 
 MIN_COS = 0.12
@@ -171,15 +175,23 @@ def segmented_pair(
 def seed_tallies(
     directory: Path, config: PipelineConfig
 ) -> tuple[dict[str, tuple[str, float]], dict[str, Tally]]:
-    """Per LiDAR frame of the recording in `directory`: (model, range noise m) and its `Tally`."""
+    """`stop_tallies` of the recording in `directory` (and its `truth.json`)."""
     from pipeline.io import read_recording
+    from pipeline.synth.truth import load_truth
+
+    return stop_tallies(
+        read_recording(directory / "recording", config.reader), load_truth(directory), config
+    )
+
+
+def stop_tallies(
+    problem: CalibrationProblem, truth: Truth, config: PipelineConfig
+) -> tuple[dict[str, tuple[str, float]], dict[str, Tally]]:
+    """Per LiDAR frame of `problem`: (model, range noise m) and its `Tally` against `truth`."""
     from pipeline.stages.runner import Listeners, run_stages
     from pipeline.stages.sequence import STAGE_SEQUENCE
     from pipeline.stages.setup import initial_state
-    from pipeline.synth.truth import load_truth
 
-    truth = load_truth(directory)
-    problem = read_recording(directory / "recording", config.reader)
     upto = [s for s in STAGE_SEQUENCE if s.name in ("moving_points", "denoise")]
     state, _ = run_stages(initial_state(problem, config.frames), config, upto, Listeners())
     models = {
@@ -287,6 +299,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--synthetic-only", action="store_true")
     parser.add_argument(
+        "--cases", nargs="*", default=[], help="fixed scenarios too (bench_calibration's cases)"
+    )
+    parser.add_argument("--case-seeds", type=int, default=2, help="seeds 0.. of each case")
+    parser.add_argument("--rate", type=float, default=0.3, help="the cases' rate scale")
+    parser.add_argument(
         "--surface-model", choices=["quadric", "plane", "beam_quadric"], default=None
     )
     args = parser.parse_args(argv)
@@ -310,11 +327,22 @@ def main(argv: Sequence[str] | None = None) -> None:
             print(tally.row(f"{kind} {1e3 * noise:.0f} mm"))
     if args.synthetic_only:
         return
+    from pipeline.synth import simulate_problem
+
+    for case in args.cases:
+        for case_seed in range(args.case_seeds):
+            problem, truth = simulate_problem(case, case_seed, args.rate)
+            models, found = stop_tallies(problem, truth, config)
+            print(f"\nCase {case} seed {case_seed} (rate {args.rate:g})")
+            print(HEADER.format(label="LiDAR (model, range noise)"))
+            for frame, tally in found.items():
+                model, noise = models[frame]
+                print(tally.row(f"{frame} ({model}, {1e3 * noise:.0f} mm)"))
     for seed in parse_seeds(args.seeds):
-        models, tallies = seed_tallies(args.recordings / f"seed-{seed}", config)
+        models, found = seed_tallies(args.recordings / f"seed-{seed}", config)
         print(f"\nSeed {seed}")
         print(HEADER.format(label="LiDAR (model, range noise)"))
-        for frame, tally in tallies.items():
+        for frame, tally in found.items():
             model, noise = models[frame]
             print(tally.row(f"{frame} ({model}, {1e3 * noise:.0f} mm)"))
 
