@@ -78,6 +78,11 @@ class SceneObject:
 
     def distance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """Unsigned distance (N,) from world `points` (N, 3) to the object's surface."""
+        return np.abs(self.signed_distance(points))
+
+    def signed_distance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Signed distance (N,) from world `points` (N, 3) to the object's surface: positive
+        outside, negative inside (behind the surface a LiDAR sees)."""
         local = (points - self.T_world_object[:3, 3]) @ self.T_world_object[:3, :3]
         d = self.dimensions
         if self.kind is ObjectKind.BOX:
@@ -92,10 +97,10 @@ class SceneObject:
         else:
             axis = np.clip(local[:, 0], -0.5 * d["length"], 0.5 * d["length"])
             offset = local - np.column_stack([axis, np.zeros_like(axis), np.zeros_like(axis)])
-            return np.asarray(np.abs(np.linalg.norm(offset, axis=1) - d["radius"]))
+            return np.asarray(np.linalg.norm(offset, axis=1) - d["radius"], dtype=np.float64)
         outside = np.linalg.norm(np.maximum(excess, 0.0), axis=1)
         inside = np.all(excess <= 0.0, axis=1)
-        return np.asarray(np.where(inside, -np.max(excess, axis=1), outside), dtype=np.float64)
+        return np.asarray(np.where(inside, np.max(excess, axis=1), outside), dtype=np.float64)
 
     def to_json(self) -> dict[str, object]:
         translation, quat = to_translation_xyzw(self.T_world_object)

@@ -61,3 +61,18 @@ def test_a_quadric_smooths_range_noise_on_a_plane_like_the_plane_does() -> None:
     assert np.std(curved[:, 2]) < 0.5 * np.std(points[:, 2])
     assert np.std(curved[:, 2]) < 2.0 * np.std(flat[:, 2])
     assert np.median(np.abs(normals[:, 2])) > np.cos(np.radians(10.0))
+
+
+def test_along_beams_moves_each_point_along_its_beam_onto_a_plane() -> None:
+    rng = np.random.default_rng(5)
+    yz = rng.uniform(-0.5, 0.5, size=(3000, 2))
+    true = np.column_stack([np.full(3000, 3.0), yz])
+    beams = true / np.linalg.norm(true, axis=1, keepdims=True)
+    noisy = true + beams * rng.normal(0.0, 0.01, (3000, 1))
+    projected, normals = local_planes(noisy, 30, quadric=True, along_beams=True)
+    # Each point stays on its own beam ...
+    cross = np.linalg.norm(np.cross(projected, beams), axis=1)
+    assert np.max(cross) < 1e-9
+    # ... and lands nearer the plane x = 3, with the plane's normal.
+    assert np.std(projected[:, 0] - 3.0) < 0.4 * np.std(noisy[:, 0] - 3.0)
+    assert np.median(np.abs(normals[:, 0])) > 0.995
