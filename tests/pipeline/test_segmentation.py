@@ -110,28 +110,34 @@ def _room(rng: np.random.Generator, floor_points: int) -> tuple[np.ndarray, np.n
     return np.concatenate([floor, wall]), up
 
 
-def _floor_of(points: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, float] | None:
+def _floor_of(
+    points: np.ndarray, up: np.ndarray, *, iterations: int = 100, seed: int = 0
+) -> tuple[np.ndarray, float] | None:
     found = find_floor(
         points,
         up,
         distance_m=0.02,
-        iterations=100,
+        iterations=iterations,
         scored_points=2000,
         max_tilt_deg=30,
         min_points=100,
-        rng=np.random.default_rng(0),
+        rng=np.random.default_rng(seed),
     )
     return None if found is None else (found[0].normal, found[0].offset)
+
+
+def _assert_the_rooms_floor(floor: tuple[np.ndarray, float] | None, seed: int = 0) -> None:
+    """`_room`'s floor: level within 0.2 deg, 1.5 m below the sensor within 5 mm."""
+    assert floor is not None, seed
+    assert floor[0][2] > np.cos(np.radians(0.2)), seed
+    assert abs(floor[1] - 1.5) < 0.005, seed
 
 
 def test_the_floor_is_found_where_walls_fill_most_of_the_cloud() -> None:
     # 600 floor points among 8600: three random points are all floor once in 3000 draws; the
     # lowest points of the columns across up are mostly floor (the walls stand on it).
     points, up = _room(np.random.default_rng(2), 600)
-    floor = _floor_of(points, up)
-    assert floor is not None
-    assert floor[0][2] > np.cos(np.radians(0.2))
-    assert abs(floor[1] - 1.5) < 0.005
+    _assert_the_rooms_floor(_floor_of(points, up))
 
 
 def test_the_floor_is_not_a_larger_plane_with_the_floor_below_it() -> None:
@@ -142,10 +148,7 @@ def test_the_floor_is_not_a_larger_plane_with_the_floor_below_it() -> None:
     room, up = _room(rng, 600)
     top = rng.uniform([1.6, -2.9], [2.9, 2.9], (2000, 2))
     shelf = np.column_stack([top, np.full(2000, -1.0)])
-    floor = _floor_of(np.concatenate([room, shelf]), up)
-    assert floor is not None
-    assert floor[0][2] > np.cos(np.radians(0.2))
-    assert abs(floor[1] - 1.5) < 0.005
+    _assert_the_rooms_floor(_floor_of(np.concatenate([room, shelf]), up))
 
 
 def test_a_floor_seen_only_as_a_far_strip_is_found_whatever_the_draws() -> None:
@@ -157,17 +160,6 @@ def test_a_floor_seen_only_as_a_far_strip_is_found_whatever_the_draws() -> None:
     radius, angle = rng.uniform(2.6, 2.9, 400), rng.uniform(0, np.pi / 2, 400)
     strip = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.full(400, -1.5)])
     points = np.concatenate([strip, walls])
+    iterations = SegmentationConfig().ransac_iterations
     for seed in range(10):
-        found = find_floor(
-            points,
-            up,
-            distance_m=0.02,
-            iterations=SegmentationConfig().ransac_iterations,
-            scored_points=2000,
-            max_tilt_deg=30,
-            min_points=100,
-            rng=np.random.default_rng(seed),
-        )
-        assert found is not None
-        assert found[0].normal[2] > np.cos(np.radians(0.2)), seed
-        assert abs(found[0].offset - 1.5) < 0.005, seed
+        _assert_the_rooms_floor(_floor_of(points, up, iterations=iterations, seed=seed), seed)

@@ -1,25 +1,36 @@
+from typing import Any
+
 import numpy as np
 
 from pipeline.geometry import log_se3
 from pipeline.optimisation import OptimisationConfig, OptimisationResult, optimise
 from pipeline.transforms import Points, invert, pose_difference
 from tests.pipeline.calibration_data import box_problem, true_T_ref_lidar
-from tests.pipeline.optimisation.inputs import stage_inputs
+from tests.pipeline.optimisation.inputs import StageInputs, stage_inputs
 
 
-def test_joint_optimisation_returns_the_extrinsics_to_the_truth() -> None:
-    _, truth = box_problem()
-    inputs = stage_inputs()
+def _optimise(
+    inputs: StageInputs, objects: list[list[Points]] | None = None, **options: Any
+) -> OptimisationResult:
+    """Stage 4 on the box problem from stage 3's poses, with the default config."""
     rough = inputs.rough
-    result = optimise(
-        inputs.objects,
+    return optimise(
+        inputs.objects if objects is None else objects,
         rough.T_G_ref,
         rough.T_ref_lidar,
         OptimisationConfig(),
         planes=inputs.planes,
         floor_G=rough.floor_G,
         normals=inputs.normals,
+        **options,
     )
+
+
+def test_joint_optimisation_returns_the_extrinsics_to_the_truth() -> None:
+    _, truth = box_problem()
+    inputs = stage_inputs()
+    rough = inputs.rough
+    result = _optimise(inputs)
     T_true = true_T_ref_lidar(truth, tuple(lidar.frame for lidar in inputs.prepared.lidars))
     start = pose_difference(T_true[1], rough.T_ref_lidar[1])
     translation, rotation = pose_difference(T_true[1], result.T_ref_lidar[1])
@@ -42,19 +53,9 @@ def test_a_range_bias_moves_the_solution_as_its_gradient_predicts() -> None:
     # Each LiDAR's surfaces set 5 mm further along its rays: the solution moves by about
     # -(H + prior)^-1 db/dbeta x 5 mm, the shift the observability stage charges to a bias.
     inputs = stage_inputs()
-    rough = inputs.rough
 
     def solve(objects: list[list[Points]]) -> OptimisationResult:
-        return optimise(
-            objects,
-            rough.T_G_ref,
-            rough.T_ref_lidar,
-            OptimisationConfig(),
-            planes=inputs.planes,
-            floor_G=rough.floor_G,
-            normals=inputs.normals,
-            range_bias=True,
-        )
+        return _optimise(inputs, objects, range_bias=True)
 
     base = solve(inputs.objects)
     assert base.range_bias_cross.shape == (base.layout.n_lidars, base.layout.size)
