@@ -11,7 +11,7 @@ from datetime import timedelta
 from http import HTTPStatus
 
 from anyio import to_thread
-from fastapi import FastAPI, Request
+from fastapi import Depends, FastAPI, Request
 from fastapi.responses import JSONResponse
 from starlette.routing import Match
 
@@ -22,6 +22,7 @@ from service.dashboard import router as dashboard_router
 from service.db import Database
 from service.deps import Services
 from service.metrics import Metrics, MetricsMiddleware
+from service.parameters import refuse_repeated_query_parameters
 from service.problem_details import MethodNotAllowed, install_problem_handlers, problem_response
 from service.routes import (
     comparison,
@@ -71,6 +72,7 @@ def create_app(settings: Settings) -> FastAPI:
         lifespan=lifespan,
         docs_url=None,  # install_api_docs: the same pages, their assets served from here
         redoc_url=None,
+        dependencies=[Depends(refuse_repeated_query_parameters)],
     )
     install_api_docs(app)
     app.state.services = None

@@ -228,6 +228,38 @@ def test_instants_utc_cannot_express_are_422_problems(api: Api) -> None:
         assert api.client.get(path, params=widest, headers=read).status_code == 200, path
 
 
+def test_instants_written_as_numbers_are_422_problems(api: Api) -> None:
+    """pydantic read "12" or "3.6e-36" as seconds since 1970 and the listing answered 200 for an
+    instant nobody asked for (schemathesis' linked sequences found it)."""
+    api.upload("R1")
+    read = api.headers("read")
+    for path in (*LISTINGS_WITH_INSTANTS, "/v1/robots/R1/history.csv"):
+        for instant in ("12", "3.656681247237943e-36", "-1", "1e10", "2026"):
+            response = api.client.get(path, params={"until": instant}, headers=read)
+            assert response.status_code == 422, (path, instant, response.text)
+            assert problem_type(response) == "invalid-request"
+            assert "RFC 3339" in response.json()["detail"], response.text
+        for instant in ("2026-01-31T12:00:00Z", "2026-01-31 12:00:00+01:00"):
+            response = api.client.get(path, params={"until": instant}, headers=read)
+            assert response.status_code == 200, (path, instant, response.text)
+
+
+def test_a_query_parameter_given_twice_is_a_422_problem(api: Api) -> None:
+    """No parameter takes a list: FastAPI kept the last of `frame=a&frame=K` and answered for K."""
+    api.upload("R1")
+    read = api.headers("read")
+    for query in (
+        "frame=&frame=a&frame=K",
+        "limit=1&limit=2",
+        "since=2026-01-01T00:00:00Z&since=x",
+    ):
+        response = api.client.get(f"/v1/robots/R1/history?{query}", headers=read)
+        assert response.status_code == 422, (query, response.text)
+        assert problem_type(response) == "invalid-request"
+        assert "more than once" in response.json()["detail"], response.text
+    assert api.client.get("/v1/robots/R1/history?frame=a&limit=2", headers=read).status_code == 200
+
+
 def test_control_characters_in_a_query_parameter_are_422_problems(api: Api) -> None:
     """PostgreSQL refuses a NUL in text; no frame holds a control character."""
     api.upload("R1")
