@@ -59,6 +59,20 @@ def scratch_pg_database() -> Iterator[str]:
         admin.close()
 
 
+@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def unmigrated_db(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Database]:
+    """An empty database on each engine, no migration applied (the migration tests apply them)."""
+    if request.param == "sqlite":
+        db = Database.from_settings(Settings(database_url=f"sqlite:///{tmp_path / 'm.db'}"))
+        yield db
+        db.dispose()
+        return
+    with scratch_pg_database() as url:
+        db = Database.from_settings(Settings(database_url=url))
+        yield db
+        db.dispose()
+
+
 @pytest.fixture(scope="session")
 def pg_session_url() -> Iterator[str]:
     with scratch_pg_database() as url:

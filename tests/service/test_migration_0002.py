@@ -4,45 +4,27 @@ accepted exactly when it passed (the calibration in use does not change on upgra
 from __future__ import annotations
 
 import uuid
-from collections.abc import Iterator
-from pathlib import Path
 
-import pytest
 from sqlalchemy import select
 
 from service import repository
 from service.db import Database
 from service.models import LidarExtrinsic, Result
-from service.settings import Settings
-from tests.service.conftest import scratch_pg_database
 from tests.service.documents import result_document
 from tests.service.uploads import new_upload
 
 
-@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
-def old_db(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Database]:
-    if request.param == "sqlite":
-        db = Database.from_settings(Settings(database_url=f"sqlite:///{tmp_path / 'm.db'}"))
-        yield db
-        db.dispose()
-        return
-    with scratch_pg_database() as url:
-        db = Database.from_settings(Settings(database_url=url))
-        yield db
-        db.dispose()
-
-
-def test_existing_results_are_accepted_as_they_passed(old_db: Database) -> None:
-    old_db.upgrade()
+def test_existing_results_are_accepted_as_they_passed(unmigrated_db: Database) -> None:
+    unmigrated_db.upgrade()
     runs = {passed: uuid.uuid4() for passed in (True, False)}
-    with old_db.transaction() as session:
+    with unmigrated_db.transaction() as session:
         for passed, run_id in runs.items():
             repository.record_upload(session, new_upload("R1", run_id=run_id), create_robot=True)
             repository.store_result(session, run_id, result_document(passed=passed))
     # Back to 0001 with the rows in place (the column goes), then up again (it is filled in).
-    old_db.downgrade("0001")
-    old_db.upgrade()
-    with old_db.session() as session:
+    unmigrated_db.downgrade("0001")
+    unmigrated_db.upgrade()
+    with unmigrated_db.session() as session:
         accepted = dict(session.execute(select(Result.run_id, Result.accepted)).tuples().all())
         rows = session.execute(select(LidarExtrinsic.run_id, LidarExtrinsic.accepted)).all()
     assert accepted == {runs[True]: True, runs[False]: False}
