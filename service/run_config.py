@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from typing import Any
 
 from pipeline import ConfigError, config_from_mapping
@@ -29,6 +30,18 @@ def _finite_float(text: str) -> float:
     return value
 
 
+def verdict_refusal(config: Mapping[str, Any]) -> str | None:
+    """Why an upload's config may not be used, when it sets the verdict: a robot must not loosen
+    its own tolerances. Checked at upload and again by the worker (`workers.job`), for configs
+    stored before this check."""
+    if "verdict" not in config:
+        return None
+    return (
+        "sets 'verdict'; a run's tolerances come from the robot's tolerance profile "
+        "(PUT /v1/tolerance-profiles/{name}), remove 'verdict'"
+    )
+
+
 def parse_run_config(raw: str | None) -> dict[str, Any] | None:
     """The config as plain data (stored with the run as sent), or `InvalidConfig`."""
     if raw is None:
@@ -47,13 +60,8 @@ def parse_run_config(raw: str | None) -> dict[str, Any] | None:
         raise InvalidConfig(f"{HEADER} is not valid JSON: {err}") from err
     if not isinstance(value, dict):
         raise InvalidConfig(f"{HEADER} must be a JSON object of config sections")
-    if "verdict" in value:
-        # The worker refuses it too (`workers.job.pipeline_config_for`): a robot must not
-        # loosen its own tolerances.
-        raise InvalidConfig(
-            f"{HEADER} sets 'verdict'; a run's tolerances come from the robot's tolerance "
-            "profile (PUT /v1/tolerance-profiles/{name}), remove 'verdict'"
-        )
+    if (refusal := verdict_refusal(value)) is not None:
+        raise InvalidConfig(f"{HEADER} {refusal}")
     try:
         config_from_mapping(value)
     except ConfigError as err:

@@ -31,6 +31,7 @@ from pipeline import (
 )
 from pipeline.io import read_recording
 from service.reports import store_report_images
+from service.run_config import verdict_refusal
 from service.settings import Settings
 from service.storage import Storage, make_storage
 from workers import drift
@@ -104,11 +105,8 @@ def pipeline_config_for(
     initial extrinsics, reader and stage settings) with the verdict's limits from the robot's
     tolerance profile. The upload may not set the verdict: a robot must not loosen its own."""
     data = dict(run_config or {})
-    if "verdict" in data:
-        raise ConfigError(
-            "the upload's config sets 'verdict'; a run's tolerances come from the robot's "
-            "tolerance profile (PUT /v1/tolerance-profiles/{name}), remove 'verdict'"
-        )
+    if (refusal := verdict_refusal(data)) is not None:
+        raise ConfigError(f"the upload's config {refusal}")
     data["verdict"] = {name: limits[name] for name in _VERDICT_LIMITS if name in limits}
     return config_from_mapping(data)
 
