@@ -16,7 +16,7 @@ on when a lease expires; the embedded SQLite database lives on one machine and u
 from __future__ import annotations
 
 import uuid
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from typing import Any
@@ -26,7 +26,7 @@ from sqlalchemy.orm import Session
 
 from service import repository
 from service.db import Database
-from service.models import Run, RunKind, RunStatus
+from service.models import DeliveryStatus, Run, RunKind, RunStatus, WebhookDelivery
 from workers.policy import Failure, FailureKind, exhausted_problem
 
 REAP_BATCH = 100
@@ -234,13 +234,25 @@ def _requeued(now: datetime, available_at: datetime) -> dict[str, Any]:
 
 
 def _held_update(session: Session, held: Claim, values: dict[str, Any]) -> int:
+    return update_if_leased(session, Run, held.run_id, RunStatus.RUNNING, held.lease_owner, values)
+
+
+def update_if_leased(
+    session: Session,
+    model: type[Run] | type[WebhookDelivery],
+    row_id: uuid.UUID,
+    status: RunStatus | DeliveryStatus,
+    lease_owner: str,
+    values: Mapping[str, Any],
+) -> int:
+    """Set `values` on row `row_id` of a leased table (runs, webhook deliveries) only while it
+    is still in `status` under `lease_owner`'s lease; how many rows changed (0 or 1).
+
+    A holder whose lease expired and was taken over changes nothing: the new holder's work
+    stands."""
     result = session.execute(
-        update(Run)
-        .where(
-            Run.id == held.run_id,
-            Run.status == RunStatus.RUNNING,
-            Run.lease_owner == held.lease_owner,
-        )
+        update(model)
+        .where(model.id == row_id, model.status == status, model.lease_owner == lease_owner)
         .values(**values)
         .execution_options(synchronize_session=False)
     )

@@ -17,13 +17,13 @@ from dataclasses import dataclass
 from datetime import timedelta
 
 import httpx
-from sqlalchemy import CursorResult, or_, select, update
+from sqlalchemy import or_, select
 from sqlalchemy.exc import SQLAlchemyError
 
 from service.db import Database
 from service.models import DeliveryStatus, Webhook, WebhookDelivery
 from service.settings import Settings
-from workers.queue import db_now
+from workers.queue import db_now, update_if_leased
 
 log = logging.getLogger(__name__)
 
@@ -170,18 +170,15 @@ def record(
             values["status"] = DeliveryStatus.FAILED
         else:
             values["available_at"] = now + options.backoff(claimed.attempt)
-        result = session.execute(
-            update(WebhookDelivery)
-            .where(
-                WebhookDelivery.id == claimed.id,
-                WebhookDelivery.status == DeliveryStatus.PENDING,
-                WebhookDelivery.lease_owner == claimed.lease_owner,
-            )
-            .values(**values)
-            .execution_options(synchronize_session=False)
+        changed = update_if_leased(
+            session,
+            WebhookDelivery,
+            claimed.id,
+            DeliveryStatus.PENDING,
+            claimed.lease_owner,
+            values,
         )
-        assert isinstance(result, CursorResult)
-        return result.rowcount == 1
+        return changed == 1
 
 
 def deliver_due(db: Database, client: httpx.Client, owner: str, options: DeliveryOptions) -> int:
