@@ -135,6 +135,7 @@ CONFIG_METHODS = (
     "without_stage1",
     "without_moving_points",
     "range_bias_estimated",
+    "beam_quadric",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -152,6 +153,8 @@ def method_config(method: str) -> PipelineConfig:
         data["moving_points"]["enabled"] = False
     elif method == "range_bias_estimated":
         data["observability"]["range_bias"] = "estimated"
+    elif method == "beam_quadric":
+        data["segmentation"]["surface_model"] = "beam_quadric"
     elif method != "proposed":
         raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
     return config_from_mapping(data)
