@@ -3,7 +3,7 @@
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -m tests.bench.bench_calibration [--quick]
         [--seeds 10] [--first-seed 0] [--rate 1.0] [--cases set1-box ...]
         [--methods proposed ...]
-        [--no-timing] [--plot convergence.png] [--recordings DIR]
+        [--no-timing] [--plot bench-out/convergence.png] [--recordings DIR]
 
 Accuracy: for every case and seed, `simulate_problem(case, seed, rate)` (initial extrinsics
 perturbed by up to 0.2 m / 5 deg, odometry by up to 0.2 m / 3 deg, as in the paper) is calibrated
@@ -534,7 +534,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--methods", nargs="*", default=list(METHODS))
     parser.add_argument("--no-timing", action="store_true")
     parser.add_argument("--timing-cases", nargs="*", default=["set1-box", "set2-box"])
-    parser.add_argument("--plot", type=Path, default=Path("convergence.png"))
+    parser.add_argument("--plot", type=Path, default=Path("bench-out/convergence.png"))
     parser.add_argument("--recordings", type=Path, default=Path("/tmp/fleetcal-bench"))
     args = parser.parse_args(argv)
     if args.quick:
@@ -570,6 +570,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     if curves:
         print("\n## Convergence on set 1 (mean error at stage-4 iteration k)\n")
         print(convergence_table(curves))
+        args.plot.parent.mkdir(parents=True, exist_ok=True)
         plot(curves, args.plot)
         print(f"\nplot: {args.plot}")
     if not args.no_timing:
