@@ -136,6 +136,7 @@ CONFIG_METHODS = (
     "without_moving_points",
     "range_bias_estimated",
     "beam_quadric",
+    "surface_k80",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -155,6 +156,8 @@ def method_config(method: str) -> PipelineConfig:
         data["observability"]["range_bias"] = "estimated"
     elif method == "beam_quadric":
         data["segmentation"]["surface_model"] = "beam_quadric"
+    elif method == "surface_k80":
+        data["segmentation"]["surface_neighbours"] = 80
     elif method != "proposed":
         raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
     return config_from_mapping(data)
