@@ -107,7 +107,7 @@ class SegmentationConfig(BaseModel):
     smooth_objects: bool = Field(
         default=True, description="object points are projected onto their local plane (range noise)"
     )
-    surface_model: Literal["plane", "quadric", "beam_quadric"] = Field(
+    surface_model: Literal["plane", "quadric", "beam_quadric", "beam_fit"] = Field(
         default="quadric",
         description="the local surface object points are projected onto and take normals from: "
         "a plane flattens curved objects by a few millimetres over a patch (biased with the view, "
@@ -119,7 +119,14 @@ class SegmentationConfig(BaseModel):
         "surfaces on average. Opt-in: over bench_random seeds 1000-1019 at full rate it succeeds "
         "on 13/20 against 11/20 (spinning 3.84 against 4.90 mm mean) but passes seed 1017 10.2 mm "
         "off (a second false pass, mixed LiDARs; 5.0 mm with quadric) and is worse on set1-box "
-        "seed 0 (3.8 against 1.7 mm)",
+        "seed 0 (3.8 against 1.7 mm). beam_fit (opt-in, experimental) is beam_quadric with each "
+        "normal from the plane fitted along the point's beam (C^-1 b, not tilted by range "
+        "noise; `local_planes`): on 2 cm voxels under 2 cm of noise its normals are far "
+        "closer to the surface's (median 7.7 against 28 deg, tests/pipeline/test_surfaces.py) "
+        "and it takes seed 1013 from 10.4 to 1.4 mm, but ambiguous patches lean their normals "
+        "on the beams: seeds 1000, 1006, 1010, 1015 and 1017 pass 11-21 mm off (five false "
+        "passes over 1000-1019, against one) and set1-box seeds 0-4 end 9.5-17.7 mm off (1.7-2.4 "
+        "with quadric)",
     )
     seed: int = 0
 
@@ -456,7 +463,8 @@ def segment_on_floor(
             config.surface_neighbours,
             config.surface_centre_neighbours,
             quadric=config.surface_model != "plane",
-            along_beams=config.surface_model == "beam_quadric",
+            along_beams=config.surface_model in ("beam_quadric", "beam_fit"),
+            normals_along_beams=config.surface_model == "beam_fit",
         )
         # The sensor sits at the origin: the beam to p is p / |p|.
         cos = np.abs(np.einsum("ni,ni->n", normals, objects)) / np.linalg.norm(objects, axis=1)

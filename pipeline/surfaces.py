@@ -20,6 +20,7 @@ def local_planes(
     *,
     quadric: bool = False,
     along_beams: bool = False,
+    normals_along_beams: bool = False,
 ) -> tuple[Points, Points]:
     """Each point projected onto its local surface, and that surface's unit normal there:
     (N, 3), (N, 3).
@@ -42,6 +43,15 @@ def local_planes(
     the heights then carry all of it. Under 30 mm of range noise, fitted along the normal the
     points of seed 1000 (rate 0.3) lay 3-5 mm behind the true surfaces along their beams,
     along the beams within 0.5 mm (the dense LiDARs; `tests/bench/bench_surface_bias.py`).
+
+    `normals_along_beams=True` (the sensor at the origin) takes each normal from the plane
+    fitted along the point's beam instead of the patch's least-spread direction: the n that
+    minimises n^T C n with n . b = 1 (C the patch's scatter, b the unit beam), i.e. C^-1 b. Range
+    noise spreads a patch along the beam, adding ~k sigma^2 b b^T to C; the least-spread
+    direction then tilts away from the beam by ~sigma^2 (n.b)(t.b) / lambda_t (lambda_t the
+    patch's spread along the surface: the smaller the patch, the larger the tilt), while
+    C^-1 b, whose residuals are distances along the beam, is not tilted by it (noise-free
+    regressors: errors-in-variables only in the heights).
     """
     if len(points) < 3:
         return points.copy(), np.tile(np.array([0.0, 0.0, 1.0]), (len(points), 1))
@@ -61,20 +71,33 @@ def local_planes(
     covariance[:, 0, 2] = covariance[:, 2, 0] = np.einsum("nk,nk->n", x, z)
     covariance[:, 1, 2] = covariance[:, 2, 1] = np.einsum("nk,nk->n", y, z)
     normals = smallest_eigenvectors(covariance)
+    beams = points / np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-12)
+    if normals_along_beams:
+        normals = _normals_along_beams(covariance, beams)
     if quadric and k >= 10:
         projected, fitted = _quadric_surfaces(points, idx, normals)
         if along_beams:
-            # Only where the point goes: fitted along a beam, a patch seen on one or two scan
-            # lines leaves the slope across them unknown, and the normal would lean on the beam.
-            beams = points / np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-12)
+            # Only where the point goes: the normal from a quadric fitted along a beam has six
+            # coefficients to spend on a patch seen on one or two scan lines.
             projected, _ = _quadric_surfaces(points, idx, beams)
-        return projected, fitted
+        return projected, normals if normals_along_beams else fitted
     if centre_neighbours is not None and centre_neighbours < k:
         # pykdtree returns the neighbours nearest first.
         near = idx[:, :centre_neighbours]
         centroid = np.column_stack([points[:, axis][near].mean(axis=1) for axis in range(3)])
     offset = np.einsum("ni,ni->n", normals, points - centroid)
     return points - offset[:, None] * normals, normals
+
+
+def _normals_along_beams(covariance: NDArray[np.float64], beams: Points) -> Points:
+    """(N, 3) unit normals C^-1 b of the planes fitted along the unit `beams` (N, 3) to the
+    patches of scatter `covariance` (N, 3, 3)."""
+    # A ridge far below any patch's spread keeps a noise-free plane (C singular along its normal,
+    # where C^-1 b points) solvable.
+    ridge = 1e-12 * (1.0 + np.trace(covariance, axis1=1, axis2=2))[:, None, None] * np.eye(3)
+    normals = np.linalg.solve(covariance + ridge, beams[:, :, None])[:, :, 0]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals
 
 
 def _quadric_surfaces(

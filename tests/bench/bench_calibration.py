@@ -137,6 +137,7 @@ CONFIG_METHODS = (
     "range_bias_estimated",
     "beam_quadric",
     "surface_k80",
+    "beam_fit",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -156,6 +157,8 @@ def method_config(method: str) -> PipelineConfig:
         data["observability"]["range_bias"] = "estimated"
     elif method == "beam_quadric":
         data["segmentation"]["surface_model"] = "beam_quadric"
+    elif method == "beam_fit":
+        data["segmentation"]["surface_model"] = "beam_fit"
     elif method == "surface_k80":
         data["segmentation"]["surface_neighbours"] = 80
     elif method != "proposed":
