@@ -136,7 +136,7 @@ CONFIG_METHODS = (
     "without_moving_points",
     "range_bias_estimated",
     "beam_quadric",
-    "surface_k80",
+    "surface_k30",
     "beam_fit",
 )
 """Methods that are the pipeline with another configuration."""
@@ -159,8 +159,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_model"] = "beam_quadric"
     elif method == "beam_fit":
         data["segmentation"]["surface_model"] = "beam_fit"
-    elif method == "surface_k80":
-        data["segmentation"]["surface_neighbours"] = 80
+    elif method == "surface_k30":
+        data["segmentation"]["surface_neighbours"] = 30
     elif method != "proposed":
         raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
     return config_from_mapping(data)
