@@ -70,10 +70,13 @@ def local_planes(
     covariance[:, 0, 1] = covariance[:, 1, 0] = np.einsum("nk,nk->n", x, y)
     covariance[:, 0, 2] = covariance[:, 2, 0] = np.einsum("nk,nk->n", x, z)
     covariance[:, 1, 2] = covariance[:, 2, 1] = np.einsum("nk,nk->n", y, z)
-    normals = smallest_eigenvectors(covariance)
-    beams = points / np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-12)
-    if normals_along_beams:
-        normals = _normals_along_beams(covariance, beams)
+    if along_beams or normals_along_beams:
+        beams = points / np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-12)
+    normals = (
+        _normals_along_beams(covariance, beams)
+        if normals_along_beams
+        else smallest_eigenvectors(covariance)
+    )
     if quadric and k >= 10:
         projected, fitted = _quadric_surfaces(points, idx, normals)
         if along_beams:

@@ -3,7 +3,7 @@ of each point behind the object surface it belongs to, raw and smoothed.
 
     .venv/bin/python -m tests.bench.bench_surface_bias [--seeds 1000,1013]
         [--recordings /tmp/honest/cache/recordings/rate-0.3] [--synthetic-only]
-        [--surface-model quadric|plane|beam_quadric|beam_fit] [--cases spinning set1-box]
+        [--surface-model MODEL] [--cases spinning set1-box]
 
 For each seed, the recording `RECORDINGS/seed-N/recording` is read and taken through the
 pipeline's stages up to segmentation (moving points, stage 1) with the default config; each
@@ -33,6 +33,7 @@ import argparse  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import get_args  # noqa: E402
 
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
@@ -304,7 +305,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--case-seeds", type=int, default=2, help="seeds 0.. of each case")
     parser.add_argument("--rate", type=float, default=0.3, help="the cases' rate scale")
     parser.add_argument(
-        "--surface-model", choices=["quadric", "plane", "beam_quadric", "beam_fit"], default=None
+        "--surface-model",
+        choices=get_args(SegmentationConfig.model_fields["surface_model"].annotation),
+        default=None,
     )
     args = parser.parse_args(argv)
     from tests.bench.bench_random import parse_seeds
