@@ -29,6 +29,9 @@ def robust_weight_and_cost(
     if loss == "cauchy":
         ratio = (distance / scale) ** 2
         return 1.0 / (1.0 + ratio), 0.5 * scale**2 * np.log1p(ratio)
+    if loss == "geman_mcclure":
+        ratio = (distance / scale) ** 2
+        return 1.0 / (1.0 + ratio) ** 2, 0.5 * scale**2 * ratio / (1.0 + ratio)
     if loss == "huber":
         inside = distance <= scale
         weight = np.where(inside, 1.0, scale / np.maximum(distance, 1e-300))

@@ -74,9 +74,13 @@ def _phases(
     normals: Sequence[Sequence[Points]] | None,
 ) -> list[JointObjective]:
     """The objective of each phase: a coarse one on `coarse_points_per_cloud` points when that is
-    fewer than the final phase's, then the final one (normal gate `fine_max_normal_angle_deg`)."""
+    fewer than the final phase's, then the final one (normal gate `fine_max_normal_angle_deg`, loss
+    `fine_robust_loss`)."""
     fine_config = config.model_copy(
-        update={"max_normal_angle_deg": config.fine_max_normal_angle_deg}
+        update={
+            "max_normal_angle_deg": config.fine_max_normal_angle_deg,
+            "robust_loss": config.fine_robust_loss or config.robust_loss,
+        }
     )
     phases = [JointObjective.build(objects, planes, floor_G, n_stops, fine_config, normals)]
     coarse_cap = config.coarse_points_per_cloud

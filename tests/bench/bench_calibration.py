@@ -138,6 +138,7 @@ CONFIG_METHODS = (
     "beam_quadric",
     "surface_k30",
     "beam_fit",
+    "fine_cauchy",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -161,6 +162,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_model"] = "beam_fit"
     elif method == "surface_k30":
         data["segmentation"]["surface_neighbours"] = 30
+    elif method == "fine_cauchy":
+        data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method != "proposed":
         raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
     return config_from_mapping(data)

@@ -5,7 +5,7 @@ from pipeline.optimisation import RobustLoss
 from pipeline.optimisation.residuals import robust_weight_and_cost
 
 
-@pytest.mark.parametrize("loss", ["cauchy", "huber", "none"])
+@pytest.mark.parametrize("loss", ["cauchy", "geman_mcclure", "huber", "none"])
 def test_the_irls_weight_is_the_cost_slope_over_the_distance(loss: RobustLoss) -> None:
     distance = np.array([1e-3, 0.02, 0.05, 0.09, 0.3, 2.0])
     scale, h = 0.1, 1e-7
@@ -15,3 +15,16 @@ def test_the_irls_weight_is_the_cost_slope_over_the_distance(loss: RobustLoss) -
     np.testing.assert_allclose(weight, (plus - minus) / (2 * h) / distance, rtol=1e-5)
     # Quadratic at zero: rho(s) ~ s^2 / 2.
     assert cost[0] == pytest.approx(0.5 * distance[0] ** 2, rel=1e-3)
+
+
+def test_geman_mcclure_stops_pulling_where_cauchy_still_pulls() -> None:
+    # The pull (weight x distance) at ten kernel scales, against the pull at one scale.
+    scale = 0.015
+    distance = np.array([scale, 10 * scale])
+    pulls = {}
+    for loss in ("cauchy", "geman_mcclure"):
+        weight, _ = robust_weight_and_cost(distance, scale, loss)
+        pull = weight * distance
+        pulls[loss] = pull[1] / pull[0]
+    assert pulls["cauchy"] > 0.15
+    assert pulls["geman_mcclure"] < 0.05

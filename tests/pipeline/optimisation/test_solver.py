@@ -10,7 +10,11 @@ from tests.pipeline.optimisation.inputs import StageInputs, stage_inputs
 
 
 def _optimise(
-    inputs: StageInputs, objects: list[list[Points]] | None = None, **options: Any
+    inputs: StageInputs,
+    objects: list[list[Points]] | None = None,
+    normals: list[list[Points]] | None = None,
+    config: OptimisationConfig | None = None,
+    **options: Any,
 ) -> OptimisationResult:
     """Stage 4 on the box problem from stage 3's poses, with the default config."""
     rough = inputs.rough
@@ -18,10 +22,10 @@ def _optimise(
         inputs.objects if objects is None else objects,
         rough.T_G_ref,
         rough.T_ref_lidar,
-        OptimisationConfig(),
+        config or OptimisationConfig(),
         planes=inputs.planes,
         floor_G=rough.floor_G,
-        normals=inputs.normals,
+        normals=inputs.normals if normals is None else normals,
         **options,
     )
 
@@ -69,3 +73,40 @@ def test_a_range_bias_moves_the_solution_as_its_gradient_predicts() -> None:
         moved = log_se3(biased.T_ref_lidar[1] @ invert(base.T_ref_lidar[1]))
         assert np.linalg.norm(predicted[:3]) > 0.001
         assert np.linalg.norm(moved[:3] - predicted[:3]) < 0.3 * np.linalg.norm(predicted[:3])
+
+
+def _with_a_surface_the_reference_never_saw(
+    inputs: StageInputs, lidar: int, offset: Points
+) -> tuple[list[list[Points]], list[list[Points]]]:
+    """`inputs`' clouds with a copy of 30 % of LiDAR `lidar`'s object points moved by `offset`
+    (its frame): a surface beside the real ones that no other LiDAR saw, like the far face of
+    an object, whose points can only pair with some other surface."""
+    rng = np.random.default_rng(0)
+    objects = [list(row) for row in inputs.objects]
+    normals = [list(row) for row in inputs.normals]
+    for stop, (points, stop_normals) in enumerate(
+        zip(inputs.objects[lidar], inputs.normals[lidar], strict=True)
+    ):
+        copied = rng.random(len(points)) < 0.3
+        objects[lidar][stop] = np.vstack([points, points[copied] + offset])
+        normals[lidar][stop] = np.vstack([stop_normals, stop_normals[copied]])
+    return objects, normals
+
+
+def test_points_on_a_surface_the_reference_never_saw_do_not_pull_in_the_final_phase() -> None:
+    # Under Cauchy's loss a point 6 cm from the surface it paired with still pulls like a
+    # millimetre inlier; Geman-McClure's pull vanishes there (the final phase's default).
+    inputs = stage_inputs()
+    _, truth = box_problem()
+    T_true = true_T_ref_lidar(truth, tuple(lidar.frame for lidar in inputs.prepared.lidars))
+    objects, normals = _with_a_surface_the_reference_never_saw(
+        inputs, 1, np.array([0.0, 0.06, 0.0])
+    )
+    errors = {}
+    for loss in ("cauchy", "geman_mcclure"):
+        config = OptimisationConfig(fine_robust_loss=loss)
+        result = _optimise(inputs, objects, normals, config)
+        errors[loss] = pose_difference(T_true[1], result.T_ref_lidar[1])[0]
+    assert OptimisationConfig().fine_robust_loss == "geman_mcclure"
+    assert errors["geman_mcclure"] < 0.004
+    assert errors["cauchy"] > 0.005  # the same data, the outliers pulling
