@@ -14,7 +14,7 @@ from __future__ import annotations
 import io
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,8 +23,9 @@ from pipeline.problem import CalibrationProblem
 from pipeline.transforms import Matrix4, Points, invert
 
 if TYPE_CHECKING:
-    from matplotlib.axes import Axes
-    from matplotlib.figure import Figure
+    from matplotlib.artist import Artist
+    from matplotlib.backend_bases import RendererBase
+    from matplotlib.text import Text
 
     from pipeline.calibrate import CalibrationResult
 
@@ -152,11 +153,11 @@ def render_report(
 
 def render(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[str, bytes]:
     """The PNG images `names` (of `REPORT_IMAGES`) for `data`, by name."""
-    return {name: _png(figure) for name, figure in figures(data, names).items()}
+    return {name: drawing.png() for name, drawing in drawings(data, names).items()}
 
 
-def figures(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[str, Figure]:
-    """The matplotlib figures of `render`, by name, in `REPORT_IMAGES` order."""
+def drawings(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[str, Drawing]:
+    """The images of `render` before encoding, by name, in `REPORT_IMAGES` order."""
     unknown = sorted(set(names) - set(REPORT_IMAGES))
     if unknown:
         raise ValueError(f"no report image {unknown}; the images are {list(REPORT_IMAGES)}")
@@ -260,11 +261,24 @@ def floor_height(points: Points, bin_m: float = 0.01) -> float:
     return float((edges[k] + edges[k + 1]) / 2)
 
 
-# -- figures ---------------------------------------------------------------------------------------
+# -- drawing ---------------------------------------------------------------------------------------
+
+Extent = tuple[float, float, float, float]
+"""(x0, x1, y0, y1) of a panel, metres."""
+
+_FONT_PT = 10
+_TITLE_PT = 12
+_PX_PER_PT = _DPI / 72
+_LINE_PT = 0.8
+# matplotlib's defaults: ticks 3.5 pt long, their labels 3.5 pt beyond, axis labels 4 pt further.
+_TICK_PX = 3.5 * _PX_PER_PT
+_TICK_LABEL_PX = _TICK_PX + 3.5 * _PX_PER_PT
+_AXIS_LABEL_PAD_PX = 4 * _PX_PER_PT
+_GRID_COLOUR = "#b0b0b0"
 
 
 def load_renderer() -> None:
-    """Import matplotlib's figure and Agg modules, once per process.
+    """Import the matplotlib modules `render` draws with, once per process.
 
     They cost more CPU than drawing set 1's three images (about 0.4 s of import on an idle
     core, twice that on a loaded one). A process that renders many reports (the service's
@@ -272,34 +286,298 @@ def load_renderer() -> None:
     front instead of paying it inside its first run. Idempotent; `render` works without it.
     """
     import matplotlib.backends.backend_agg
+    import matplotlib.collections
     import matplotlib.figure
+    import matplotlib.lines
     import matplotlib.patches
     import matplotlib.ticker  # noqa: F401
 
 
-def _figure(width_in: float, height_in: float, **margins: float) -> Figure:
-    """A figure whose panels sit within fixed `margins` (`Figure.subplots_adjust`'s fractions).
+@dataclass(frozen=True)
+class Panel:
+    """A plot on a `Drawing`: its box in pixels from the image's lower left (matplotlib's display
+    coordinates) and the data range `extent` it spans."""
 
-    Fixed, not "constrained": the constrained layout measured every tick label of every panel
-    and took most of the drawing time (about 1 s of 1.5 s for set 1's three images)."""
-    from matplotlib.figure import Figure
+    left: int
+    bottom: int
+    width: int
+    height: int
+    extent: Extent
 
-    # No pyplot: no global figure registry, safe in worker threads and processes.
-    figure = Figure(figsize=(width_in, height_in), dpi=_DPI)
-    figure.subplots_adjust(**margins)
-    return figure
+    @property
+    def right(self) -> int:
+        return self.left + self.width
+
+    @property
+    def top(self) -> int:
+        return self.bottom + self.height
+
+    def pixels(
+        self, x: NDArray[np.float64], y: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Where data coordinates `x`, `y` lie on the image, pixels from its lower left."""
+        x0, x1, y0, y1 = self.extent
+        return (
+            self.left + (np.asarray(x, dtype=np.float64) - x0) * (self.width / (x1 - x0)),
+            self.bottom + (np.asarray(y, dtype=np.float64) - y0) * (self.height / (y1 - y0)),
+        )
+
+    def point(self, x: float, y: float) -> tuple[float, float]:
+        px, py = self.pixels(np.array([x]), np.array([y]))
+        return float(px[0]), float(py[0])
 
 
-def _png(figure: Figure) -> bytes:
-    buffer = io.BytesIO()
-    # zlib level 1: these images are mostly flat colour, and level 6 (the default) spent a third
-    # of the drawing time compressing them for a few per cent of size.
-    figure.savefig(buffer, format="png", pil_kwargs={"compress_level": 1})
-    return buffer.getvalue()
+@dataclass(frozen=True)
+class LegendKey:
+    """One legend entry: a filled swatch of `colour`, or a line of `linestyle` (and `marker`)."""
+
+    label: str
+    colour: str
+    linestyle: Literal["-", "--"] | None = None
+    marker: str = ""
 
 
-Extent = tuple[float, float, float, float]
-"""(x0, x1, y0, y1) of a panel, metres."""
+Tick = tuple[float, str]
+"""A tick's value (data units) and its label."""
+
+
+class Drawing:
+    """One report image, `width` x `height` pixels: a matplotlib figure without Axes, laid out
+    in pixels, whose maps are RGB images composed in numpy (`paste`) under lines and text
+    (frames, ticks, grids, labels, legends, curves).
+
+    No matplotlib Axes: building and drawing their ticks and labels took most of the report's
+    time (0.15-0.35 s per image for set 1), and their images are resampled onto the screen
+    (0.1 s per map panel) where `paste` copies pixels. The tick values still come from
+    matplotlib's locators and every line and letter from its Agg renderer."""
+
+    def __init__(self, width: int, height: int) -> None:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        # No pyplot: no global figure registry, safe in worker threads and processes.
+        self.figure = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI)
+        # Agg's: texts measure themselves with its renderer (`widest`).
+        FigureCanvasAgg(self.figure)
+        self.panels: list[Panel] = []
+
+    def png(self) -> bytes:
+        buffer = io.BytesIO()
+        # zlib level 1: these images are mostly flat colour, and level 6 (the default) spent a
+        # third of the drawing time compressing them for a few per cent of size.
+        self.figure.savefig(buffer, format="png", pil_kwargs={"compress_level": 1})
+        return buffer.getvalue()
+
+    def add(self, artist: Artist) -> None:
+        """Add `artist`, whose coordinates are pixels from the image's lower left."""
+        from matplotlib.transforms import IdentityTransform
+
+        artist.set_transform(IdentityTransform())
+        self.figure.add_artist(artist)
+
+    def text(self, x: float, y: float, text: str, **style: Any) -> Text:
+        """`text` at pixel `x`, `y` (from the lower left); `style`: `Text`'s properties."""
+        from matplotlib.transforms import IdentityTransform
+
+        style.setdefault("fontsize", _FONT_PT)
+        return self.figure.text(x, y, text, transform=IdentityTransform(), **style)
+
+    def widest(self, texts: Sequence[Text]) -> float:
+        """The widest of `texts` on the image, pixels."""
+        return max((t.get_window_extent().width for t in texts), default=0.0)
+
+    def lines(
+        self,
+        segments: Sequence[tuple[tuple[float, float], tuple[float, float]]],
+        colour: str,
+        *,
+        alpha: float = 1.0,
+        zorder: float = 2.0,
+    ) -> None:
+        from matplotlib.collections import LineCollection
+
+        self.add(
+            LineCollection(segments, colors=colour, linewidths=_LINE_PT, alpha=alpha, zorder=zorder)
+        )
+
+    def panel(
+        self,
+        box: tuple[int, int, int, int],
+        extent: Extent,
+        *,
+        xlabel: str | None = None,
+        ylabel: str | None = None,
+        xticks: Sequence[Tick] | None = None,
+        yticks: Sequence[Tick] | None = None,
+        xtick_labels: bool = True,
+        ytick_labels: bool = True,
+        grid_alpha: float = 0.25,
+        ylabel_pt: float = _FONT_PT,
+    ) -> Panel:
+        """A framed panel at `box` (left, bottom, width, height in pixels) spanning `extent`,
+        with a grid at its ticks (`xticks`, `yticks`: matplotlib's choice when None)."""
+        panel = Panel(*box, extent=extent)
+        self.panels.append(panel)
+        x0, x1, y0, y1 = extent
+        if xticks is None:
+            xticks = linear_ticks(x0, x1, panel.width / _PX_PER_PT / (3 * _FONT_PT))
+        if yticks is None:
+            yticks = linear_ticks(y0, y1, panel.height / _PX_PER_PT / (2 * _FONT_PT))
+        xs, _ = panel.pixels(np.array([v for v, _ in xticks]), np.zeros(len(xticks)))
+        _, ys = panel.pixels(np.zeros(len(yticks)), np.array([v for v, _ in yticks]))
+        left, right, bottom, top = panel.left, panel.right, panel.bottom, panel.top
+        self.lines(
+            [((x, bottom), (x, top)) for x in xs] + [((left, y), (right, y)) for y in ys],
+            _GRID_COLOUR,
+            alpha=grid_alpha,
+            zorder=1.5,
+        )
+        self.lines(
+            [((x, bottom), (x, bottom - _TICK_PX)) for x in xs]
+            + [((left, y), (left - _TICK_PX, y)) for y in ys]
+            + [((left, bottom), (right, bottom)), ((right, bottom), (right, top))]
+            + [((right, top), (left, top)), ((left, top), (left, bottom))],
+            "black",
+            zorder=2.5,
+        )
+        if xtick_labels:
+            for x, (_, label) in zip(xs, xticks, strict=True):
+                self.text(x, bottom - _TICK_LABEL_PX, label, ha="center", va="top")
+        labels = (
+            [
+                self.text(left - _TICK_LABEL_PX, y, label, ha="right", va="center_baseline")
+                for y, (_, label) in zip(ys, yticks, strict=True)
+            ]
+            if ytick_labels
+            else []
+        )
+        if xlabel is not None:
+            # Below the tick labels (about 1.2 lines of the font).
+            below = _TICK_LABEL_PX + 1.2 * _FONT_PT * _PX_PER_PT + _AXIS_LABEL_PAD_PX
+            self.text((left + right) / 2, bottom - below, xlabel, ha="center", va="top")
+        if ylabel is not None:
+            beside = _TICK_LABEL_PX + self.widest(labels) + _AXIS_LABEL_PAD_PX
+            self.text(
+                left - beside,
+                (bottom + top) / 2,
+                ylabel,
+                ha="right",
+                va="center",
+                rotation=90,
+                fontsize=ylabel_pt,
+            )
+        return panel
+
+    def paste(self, panel: Panel, image: NDArray[np.float64]) -> None:
+        """Fill `panel` with the (rows, cols, 3) RGB `image` in [0, 1] (row 0 at the bottom of
+        its extent): each screen pixel takes the cell under its centre (nearest neighbour)."""
+        rows, cols, _ = image.shape
+        cells = np.empty((rows, cols, 4), dtype=np.uint8)
+        cells[..., :3] = np.round(image * 255)
+        cells[..., 3] = 255
+        up = ((np.arange(panel.height) + 0.5) * (rows / panel.height)).astype(int)
+        across = ((np.arange(panel.width) + 0.5) * (cols / panel.width)).astype(int)
+        self.figure.add_artist(_pixels(panel.left, panel.bottom, cells[up][:, across]))
+
+    def title(self, panel: Panel, title: str, fontsize: float = _TITLE_PT) -> None:
+        """`title` centred above `panel` (6 pt above it, as matplotlib's axes titles)."""
+        top = panel.top + 6 * _PX_PER_PT
+        self.text((panel.left + panel.right) / 2, top, title, ha="center", fontsize=fontsize)
+
+    def suptitle(self, title: str) -> None:
+        """`title` centred at the top of the image."""
+        width, height = self.figure.bbox.width, self.figure.bbox.height
+        self.text(width / 2, 0.98 * height, title, ha="center", va="top", fontsize=_TITLE_PT)
+
+    def legend(self, panel: Panel, keys: Sequence[LegendKey]) -> None:
+        """`keys` in a box at `panel`'s upper right (matplotlib's legend, its sizes in ems)."""
+        from matplotlib.lines import Line2D
+        from matplotlib.patches import Rectangle
+
+        em = _FONT_PT * _PX_PER_PT
+        pad, handle, gap, row = 0.4 * em, 2.0 * em, 0.8 * em, 1.5 * em
+        labels = [self.text(0, 0, key.label, va="center_baseline", zorder=6) for key in keys]
+        width = 2 * pad + handle + gap + self.widest(labels)
+        height = 2 * pad + len(keys) * row - 0.5 * em
+        right, top = panel.right - 0.5 * em, panel.top - 0.5 * em
+        left = right - width
+        self.add(
+            Rectangle(
+                (left, top - height),
+                width,
+                height,
+                facecolor=(1.0, 1.0, 1.0, 0.9),
+                edgecolor="0.8",
+                linewidth=_LINE_PT,
+                zorder=5,
+            )
+        )
+        for k, (key, label) in enumerate(zip(keys, labels, strict=True)):
+            y = top - pad - 0.5 * em - k * row
+            x = left + pad
+            if key.linestyle is None:
+                swatch: Artist = Rectangle(
+                    (x, y - 0.35 * em), handle, 0.7 * em, color=key.colour, zorder=6
+                )
+            else:
+                swatch = Line2D(
+                    [x, x + handle / 2, x + handle],
+                    [y, y, y],
+                    color=key.colour,
+                    linestyle=key.linestyle,
+                    marker=key.marker,
+                    markevery=[1],
+                    markersize=3,
+                    zorder=6,
+                )
+            self.add(swatch)
+            label.set_position((x + handle + gap, y))
+
+
+def _pixels(left: int, bottom: int, rgba: NDArray[np.uint8]) -> Artist:
+    """An artist that puts the (rows, cols, 4) `rgba` image (first row at the bottom) on the
+    canvas pixel for pixel, its lower left corner at pixel `left`, `bottom`."""
+    from matplotlib.artist import Artist
+
+    class Pixels(Artist):
+        def draw(self, renderer: RendererBase) -> None:
+            if self.get_visible():
+                gc = renderer.new_gc()
+                renderer.draw_image(gc, left, bottom, rgba)
+                gc.restore()
+
+    return Pixels()
+
+
+def linear_ticks(low: float, high: float, bins: float) -> list[Tick]:
+    """Ticks within [low, high] at matplotlib's "nice" steps (at most `bins` + 1 of them, never
+    more than 10, as its automatic locator), labelled with as many decimals as the step needs
+    and a true minus sign."""
+    from matplotlib.ticker import MaxNLocator
+
+    locator = MaxNLocator(nbins=max(1, min(9, int(bins))), steps=[1, 2, 2.5, 5, 10])
+    values = np.asarray(locator.tick_values(low, high), dtype=np.float64)
+    step = float(values[1] - values[0]) if len(values) > 1 else 1.0
+    slack = 1e-9 * step
+    values = values[(values >= low - slack) & (values <= high + slack)]
+    values = np.where(np.abs(values) < slack, 0.0, values)  # no "-0"
+    decimals = next(d for d in range(12) if np.allclose(np.round(values, d), values, atol=slack))
+    return [(float(v), f"{v:.{decimals}f}".replace("-", "\u2212")) for v in values]
+
+
+def _lidar_keys(frames: Sequence[str]) -> list[LegendKey]:
+    keys = [
+        LegendKey(frame + (" (reference)" if i == 0 else ""), lidar_colour(i))
+        for i, frame in enumerate(frames)
+    ]
+    if len(frames) > 1:
+        both = np.prod([_rgb(lidar_colour(i)) for i in range(len(frames))], axis=0)
+        keys.append(LegendKey("LiDARs overlapping", _hex(both)))
+    return keys
+
+
+def _hex(rgb: NDArray[np.float64]) -> str:
+    return "#" + "".join(f"{round(float(c) * 255):02x}" for c in rgb)
 
 
 def _density_image(
@@ -353,33 +631,6 @@ def _rgb(colour: str) -> tuple[float, float, float]:
     )
 
 
-def _draw(
-    axes: Axes, layers: Sequence[NDArray[np.float64]], extent: Extent, cols: int, rows: int
-) -> None:
-    axes.imshow(
-        _density_image(layers, extent, cols, rows),
-        extent=extent,
-        origin="lower",
-        interpolation="nearest",
-        aspect="auto",
-    )
-    axes.set_xlim(extent[0], extent[1])
-    axes.set_ylim(extent[2], extent[3])
-
-
-def _legend(axes: Axes, frames: Sequence[str]) -> None:
-    from matplotlib.patches import Patch
-
-    handles = [
-        Patch(color=lidar_colour(i), label=frame + (" (reference)" if i == 0 else ""))
-        for i, frame in enumerate(frames)
-    ]
-    if len(frames) > 1:
-        both = np.prod([_rgb(lidar_colour(i)) for i in range(len(frames))], axis=0)
-        handles.append(Patch(color=tuple(both), label="LiDARs overlapping"))
-    axes.legend(handles=handles, loc="upper right", framealpha=0.9)
-
-
 def _dense_extent(
     points: NDArray[np.float64], cell_m: float, margin_m: float, fallback: Extent
 ) -> Extent:
@@ -424,56 +675,68 @@ def _square(x0: float, x1: float, y0: float, y1: float) -> Extent:
     return (cx - half, cx + half, cy - half, cy + half)
 
 
-def _outside_note(axes: Axes, placed: Sequence[Points], surroundings: Extent) -> None:
+def _outside_note(
+    drawing: Drawing, panel: Panel, placed: Sequence[Points], surroundings: Extent
+) -> None:
     """Say so when more points than the LiDARs' stray far returns (1 %) lie beyond the robot's
     surroundings: the poses threw them there, and the view does not follow them."""
     share, farthest = points_outside(placed, surroundings)
     if share > 0.01:
-        axes.text(
-            0.02,
-            0.02,
+        drawing.text(
+            panel.left + 0.02 * panel.width,
+            panel.bottom + 0.02 * panel.height,
             f"{share:.0%} of the points lie beyond the robot's surroundings, up to "
             f"{farthest:.0f} m: not in this view",
-            transform=axes.transAxes,
-            fontsize=10,
             color=_WARNING_COLOUR,
             bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": _WARNING_COLOUR},
+            gid=OUTSIDE_NOTE,
+            zorder=6,
         )
 
 
-def _top_view(data: ReportInput, maps: _Maps) -> Figure:
-    figure = _figure(14, 7.8, left=0.05, right=0.99, bottom=0.07, top=0.86, wspace=0.06)
-    panels = figure.subplots(1, 2, sharex=True, sharey=True)
+OUTSIDE_NOTE = "outside-note"
+"""The `gid` of a map panel's note on the points out of view."""
+
+
+def _top_view(data: ReportInput, maps: _Maps) -> Drawing:
+    # Two square panels side by side under the titles, as tall as the image allows.
+    drawing = Drawing(1400, 780)
+    size, bottom = 616, 55
     shown_after = [p[m, :2] for p, m in zip(maps.after, maps.objects, strict=True)]
     shown_before = [p[m, :2] for p, m in zip(maps.before, maps.objects, strict=True)]
     extent = maps.extent
     # Cells of 2 cm at least (the segmentation's voxel): sparse clouds still show surfaces.
     cells = int(min(_TOP_PIXELS, (extent[1] - extent[0]) / _MIN_CELL_M))
-    for axes, layers, placed, title in zip(
-        panels,
+    for left, layers, placed, title in zip(
+        (80, 1386 - size),
         (shown_before, shown_after),
         (maps.before, maps.after),
         _panel_titles(data),
         strict=True,
     ):
-        _draw(axes, layers, extent, cols=cells, rows=cells)
-        _outside_note(axes, placed, maps.surroundings)
-        axes.set_title(title, y=1.0)
-        axes.set_aspect("equal", adjustable="box")
-        axes.set_xlabel("x (m)")
-        axes.grid(True, alpha=0.25)
-    panels[0].set_ylabel("y (m)")
-    _legend(panels[1], data.frames)
-    figure.suptitle(
+        first = left == 80
+        panel = drawing.panel(
+            (left, bottom, size, size),
+            extent,
+            xlabel="x (m)",
+            ylabel="y (m)" if first else None,
+            ytick_labels=first,
+        )
+        drawing.paste(panel, _density_image(layers, extent, cells, cells))
+        _outside_note(drawing, panel, placed, maps.surroundings)
+        drawing.title(panel, title)
+    drawing.legend(drawing.panels[1], _lidar_keys(data.frames))
+    drawing.suptitle(
         "Top view: points above the floor from every stop, in the base frame of the first stop\n"
         "A mismatch shows each object twice, once per colour; agreement darkens them together"
     )
-    return figure
+    return drawing
 
 
-def _side_view(data: ReportInput, maps: _Maps) -> Figure:
-    figure = _figure(14, 6.4, left=0.05, right=0.99, bottom=0.09, top=0.83, hspace=0.25)
-    panels = figure.subplots(2, 1, sharex=True, sharey=True)
+def _side_view(data: ReportInput, maps: _Maps) -> Drawing:
+    # Two wide panels, before above after.
+    drawing = Drawing(1400, 640)
+    left, width, height = 70, 1316, 210
     x0, x1, _, _ = maps.extent
     floor_z = maps.floor_z
     # Heights of both maps' points in the top view's box: a tilted failed map must not
@@ -487,20 +750,25 @@ def _side_view(data: ReportInput, maps: _Maps) -> Figure:
     cols = int(min(_SIDE_COLS, (x1 - x0) / _MIN_CELL_M))
     # Heights are stretched on screen: finer cells in z keep the floor a thin line.
     rows = int(min(_SIDE_ROWS, (extent[3] - extent[2]) / (_MIN_CELL_M / 2)))
-    for axes, placed, title in zip(
-        panels, (maps.before, maps.after), _panel_titles(data), strict=True
+    for bottom, placed, title in zip(
+        (321, 58), (maps.before, maps.after), _panel_titles(data), strict=True
     ):
-        _draw(axes, [p[:, [0, 2]] for p in placed], extent, cols=cols, rows=rows)
-        axes.set_title(title, y=1.0)
-        axes.set_ylabel("z (m)")
-        axes.grid(True, alpha=0.25)
-    panels[1].set_xlabel("x (m)")
-    _legend(panels[1], data.frames)
-    figure.suptitle(
+        after = bottom == 58
+        panel = drawing.panel(
+            (left, bottom, width, height),
+            extent,
+            xlabel="x (m)" if after else None,
+            ylabel="z (m)",
+            xtick_labels=after,
+        )
+        drawing.paste(panel, _density_image([p[:, [0, 2]] for p in placed], extent, cols, rows))
+        drawing.title(panel, title)
+    drawing.legend(drawing.panels[1], _lidar_keys(data.frames))
+    drawing.suptitle(
         "Side view: all points of every stop, height stretched\n"
         "A mismatch shows the floor and the objects at several heights and tilts"
     )
-    return figure
+    return drawing
 
 
 def convergence_note(data: ReportInput) -> str | None:
@@ -524,64 +792,134 @@ def convergence_note(data: ReportInput) -> str | None:
     )
 
 
-def _error_curve(data: ReportInput) -> Figure:
+def _error_curve(data: ReportInput) -> Drawing:
     import textwrap
 
-    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+    from matplotlib.lines import Line2D
 
     note = convergence_note(data)
     label = "iteration" + ("\n" + textwrap.fill(note, 90) if note else "")
-    # Room below the axes for the x label's lines (about 0.18 in each at 10 pt, of 4.8 in).
-    bottom = 0.07 + 0.038 * (label.count("\n") + 1) + 0.03
-    figure = _figure(8, 4.8, left=0.1, right=0.97, bottom=bottom, top=0.87)
-    axes = figure.subplots()
+    # Room below the panel for the x label's lines (about 0.18 in each at 10 pt, of 4.8 in).
+    width, height = 800, 480
+    bottom = round(height * (0.07 + 0.038 * (label.count("\n") + 1) + 0.03))
+    box = (80, bottom, 776 - 80, round(0.87 * height) - bottom)
+    drawing = Drawing(width, height)
     errors = np.asarray(data.error_per_iteration, dtype=np.float64) * 1000
     final_mm = data.metric_error_final * 1000
-    if len(errors):
-        axes.plot(
-            np.arange(len(errors)),
-            errors,
-            marker="o",
-            markersize=3,
-            color=LIDAR_COLOURS[0],
-            label="optimiser's error (eq. 11)",
-        )
-        if np.isfinite(final_mm):
-            axes.axhline(
-                final_mm,
-                color=LIDAR_COLOURS[1],
-                linestyle="--",
-                linewidth=1.2,
-                label=f"reported metric error (eq. 12): {_mm(data.metric_error_final)}",
-            )
-        finite = np.concatenate([errors, [final_mm]])
-        finite = finite[np.isfinite(finite) & (finite > 0)]
-        if len(finite) and finite.max() / finite.min() > 20:
-            axes.set_yscale("log")
-            axes.yaxis.set_major_formatter(ScalarFormatter())
-        axes.annotate(
-            _mm(data.error_per_iteration[-1]),
-            (len(errors) - 1, errors[-1]),
-            textcoords="offset points",
-            xytext=(-10, 10),
-            ha="right",
-        )
-        axes.legend(loc="upper right", framealpha=0.9)
+    values = np.concatenate([errors, [final_mm]])
+    values = values[np.isfinite(values)]
+    log = bool(len(values[values > 0])) and _spans(values[values > 0]) > 20
+    if log:
+        # A log axis: its positions are log10 of the millimetres, its ticks at 1, 2 and 5 x 10^k.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            axis = np.where(errors > 0, np.log10(errors), np.nan)
+            final_axis = np.log10(final_mm) if final_mm > 0 else np.nan
+        low, high = _with_margins(np.log10(values[values > 0]))
+        yticks: list[Tick] | None = _log_ticks(low, high)
     else:
-        axes.text(0.5, 0.5, "no iterations recorded", ha="center", transform=axes.transAxes)
-    axes.xaxis.set_major_locator(MaxNLocator(integer=True))
-    axes.set_xlabel(label)
-    axes.set_ylabel("mean point distance to the reference map (mm)", fontsize=9)
-    axes.grid(True, alpha=0.3, which="both")
+        axis, final_axis = errors, final_mm
+        low, high = _with_margins(values) if len(values) else (0.0, 1.0)
+        yticks = None
+    n = len(errors)
+    x0, x1 = _with_margins(np.arange(n, dtype=np.float64)) if n else (0.0, 1.0)
+    xticks = _integer_ticks(x0, x1, box[2] / _PX_PER_PT / (3 * _FONT_PT))
+    panel = drawing.panel(
+        box,
+        (x0, x1, low, high),
+        xlabel=label,
+        ylabel="mean point distance to the reference map (mm)",
+        ylabel_pt=9,
+        xticks=xticks,
+        yticks=yticks,
+        grid_alpha=0.3,
+    )
+    if n:
+        keys = [LegendKey("optimiser's error (eq. 11)", LIDAR_COLOURS[0], "-", "o")]
+        xs, ys = panel.pixels(np.arange(n, dtype=np.float64), axis)
+        drawing.add(
+            Line2D(xs, ys, marker="o", markersize=3, color=LIDAR_COLOURS[0], label=keys[0].label)
+        )
+        if np.isfinite(final_axis):
+            keys.append(
+                LegendKey(
+                    f"reported metric error (eq. 12): {_mm(data.metric_error_final)}",
+                    LIDAR_COLOURS[1],
+                    "--",
+                )
+            )
+            _, y = panel.point(x0, final_axis)
+            drawing.add(
+                Line2D(
+                    [panel.left, panel.right],
+                    [y, y],
+                    color=LIDAR_COLOURS[1],
+                    linestyle="--",
+                    linewidth=1.2,
+                    label=keys[1].label,
+                )
+            )
+        if np.isfinite(ys[-1]):
+            # 10 pt to the upper left of the last point, as an annotation offset in points.
+            offset = 10 * _PX_PER_PT
+            drawing.text(
+                xs[-1] - offset,
+                ys[-1] + offset,
+                _mm(data.error_per_iteration[-1]),
+                ha="right",
+                gid=LAST_ERROR,
+            )
+        drawing.legend(panel, keys)
+    else:
+        drawing.text(
+            (panel.left + panel.right) / 2,
+            (panel.bottom + panel.top) / 2,
+            "no iterations recorded",
+            ha="center",
+        )
     state = (
         "" if data.converged is None else (", converged" if data.converged else ", not converged")
     )
-    axes.set_title(
+    drawing.title(
+        panel,
         f"Joint optimisation: error per iteration{state}\nmetric error "
         f"{_mm(data.metric_error_initial)} before, {_mm(data.metric_error_final)} after",
-        y=1.0,
     )
-    return figure
+    return drawing
+
+
+LAST_ERROR = "last-error"
+"""The `gid` of the error curve's label of its last value."""
+
+
+def _spans(positive: NDArray[np.float64]) -> float:
+    return float(positive.max() / positive.min())
+
+
+def _with_margins(values: NDArray[np.float64], margin: float = 0.05) -> tuple[float, float]:
+    """The range of `values` grown by `margin` of it on each side (matplotlib's autoscale); one
+    unit on each side of a single value (or 5 % of it)."""
+    low, high = float(values.min()), float(values.max())
+    if high == low:
+        grow = 0.05 * abs(low) or 1.0
+        return low - grow, high + grow
+    grow = margin * (high - low)
+    return low - grow, high + grow
+
+
+def _integer_ticks(low: float, high: float, bins: float) -> list[Tick]:
+    from matplotlib.ticker import MaxNLocator
+
+    locator = MaxNLocator(nbins=max(1, min(9, int(bins))), integer=True)
+    values = locator.tick_values(low, high)
+    return [(float(v), f"{v:.0f}".replace("-", "\u2212")) for v in values if low <= v <= high]
+
+
+def _log_ticks(low: float, high: float) -> list[Tick]:
+    """Ticks at 1, 2 and 5 x 10^k between 10^`low` and 10^`high`, at their log10 positions."""
+    from matplotlib.ticker import LogLocator
+
+    values = LogLocator(subs=(1.0, 2.0, 5.0)).tick_values(10**low, 10**high)
+    return [(float(np.log10(v)), f"{v:g}") for v in values if low <= np.log10(v) <= high]
 
 
 def _mm(value: float) -> str:

@@ -20,13 +20,17 @@ from pipeline.calibrate import calibrate
 from pipeline.config import config_from_mapping
 from pipeline.problem import CalibrationProblem
 from pipeline.report import (
+    LAST_ERROR,
+    OUTSIDE_NOTE,
     REPORT_IMAGES,
+    Drawing,
     ReportInput,
     convergence_note,
-    figures,
+    drawings,
     floor_height,
     grid_counts,
     lidar_colour,
+    linear_ticks,
     map_extent,
     map_poses,
     points_outside,
@@ -186,6 +190,62 @@ def test_both_panels_show_each_lidar_in_its_own_colour(
             assert pixels_of(panel, lidar_colour(i)) > 200, (name, i)
 
 
+def test_the_images_keep_their_labels_legends_and_titles(truth_input: ReportInput) -> None:
+    drawn = drawings(truth_input)
+    texts = {name: [t.get_text() for t in d.figure.texts] for name, d in drawn.items()}
+    front, rear = truth_input.frames
+    for name, axis_labels in (("map-top", ["x (m)", "y (m)"]), ("map-side", ["x (m)", "z (m)"])):
+        assert set(axis_labels) <= set(texts[name]), name
+        assert {f"{front} (reference)", rear, "LiDARs overlapping"} <= set(texts[name]), name
+        assert "Before calibration: metric error 91.2 mm" in texts[name], name
+        assert "After calibration: metric error 1.50 mm, PASSED" in texts[name], name
+        # Tick labels in metres on every panel's axes, a true minus sign below zero.
+        assert "0" in texts[name] or "0.0" in texts[name], name
+    assert "optimiser's error (eq. 11)" in texts["error"]
+    # No matplotlib Axes (their ticks and layout were most of the drawing time): pixel layout.
+    assert all(not d.figure.axes for d in drawn.values())
+    assert [len(d.panels) for d in drawn.values()] == [2, 2, 1]
+
+
+def test_a_pasted_map_lies_where_its_ticks_say() -> None:
+    drawing = Drawing(400, 300)
+    panel = drawing.panel((60, 50, 300, 200), (-2.0, 4.0, 10.0, 12.0), xlabel="x (m)")
+    # 30 x 20 cells of 0.2 x 0.1 m; one red, at x -1.0 to -0.8 m and y 11.5 to 11.6 m.
+    image = np.ones((20, 30, 3))
+    image[15, 5] = (1.0, 0.0, 0.0)
+    drawing.paste(panel, image)
+
+    rgb = decoded(drawing.png())
+    rows, cols = np.nonzero((rgb[..., 0] > 200) & (rgb[..., 1] < 60) & (rgb[..., 2] < 60))
+    (x0, y0), (x1, y1) = panel.point(-1.0, 11.5), panel.point(-0.8, 11.6)
+    assert 0.8 * (x1 - x0) * (y1 - y0) <= len(rows) <= 1.3 * (x1 - x0) * (y1 - y0)
+    assert abs(cols.mean() + 0.5 - (x0 + x1) / 2) < 1
+    # The PNG's rows count from the top, the drawing's pixels from the bottom.
+    assert abs(300 - rows.mean() - 0.5 - (y0 + y1) / 2) < 1
+    labels = {t.get_text(): t.get_position() for t in drawing.figure.texts}
+    assert labels["\u22122"][0] == panel.left and labels["4"][0] == panel.right
+    assert labels["10.0"][1] == panel.bottom and labels["12.0"][1] == panel.top
+
+
+def test_ticks_are_matplotlibs_with_the_decimals_their_step_needs() -> None:
+    ticks = linear_ticks(-2.93, 4.21, 9)
+    assert [value for value, _ in ticks] == list(range(-2, 5))
+    assert [label for _, label in ticks] == ["\u22122", "\u22121", "0", "1", "2", "3", "4"]
+    assert [label for _, label in linear_ticks(-0.38, 0.49, 7)] == [
+        "\u22120.2",
+        "0.0",
+        "0.2",
+        "0.4",
+    ]
+    assert [label for _, label in linear_ticks(0.0, 1.0, 4)] == [
+        "0.00",
+        "0.25",
+        "0.50",
+        "0.75",
+        "1.00",
+    ]
+
+
 def test_no_iterations_still_renders(truth_input: ReportInput) -> None:
     unknown = replace(truth_input, error_per_iteration=(), passed=None, converged=None)
     assert decoded(render(unknown, names=["error"])["error"]).shape[1] >= 800
@@ -245,8 +305,8 @@ def test_the_after_panel_counts_the_points_thrown_out_of_view(
     truth_input: ReportInput, diverged_input: ReportInput
 ) -> None:
     def notes(data: ReportInput) -> list[str]:
-        top = figures(data, names=["map-top"])["map-top"]
-        return [text.get_text() for axes in top.axes for text in axes.texts]
+        top = drawings(data, names=["map-top"])["map-top"]
+        return [text.get_text() for text in top.figure.texts if text.get_gid() == OUTSIDE_NOTE]
 
     assert notes(truth_input) == []
     (note,) = notes(diverged_input)
@@ -268,12 +328,12 @@ def test_the_error_curve_ends_at_the_reported_metric_or_says_why_not(
     assert note is not None
     assert note.startswith("The curve ends at 1.50 mm, the reported metric error is 2.10 mm")
     assert "eq. 11" in note and "eq. 12" in note
-    figure = figures(differs, names=["error"])["error"]
-    (axes,) = figure.axes
-    assert "The curve ends at 1.50 mm" in axes.get_xlabel()
-    labels = [line.get_label() for line in axes.get_lines()]
+    figure = drawings(differs, names=["error"])["error"].figure
+    texts = [text.get_text() for text in figure.texts]
+    assert any(text.startswith("iteration\nThe curve ends at 1.50 mm") for text in texts)
+    labels = [artist.get_label() for artist in figure.artists]
     assert "reported metric error (eq. 12): 2.10 mm" in labels
-    assert [text.get_text() for text in axes.texts] == ["1.50 mm"]
+    assert [text.get_text() for text in figure.texts if text.get_gid() == LAST_ERROR] == ["1.50 mm"]
     unmeasured = replace(truth_input, metric_error_final=float("nan"))
     assert "no metric error was measured" in (convergence_note(unmeasured) or "")
     assert convergence_note(replace(truth_input, error_per_iteration=())) is None
