@@ -11,8 +11,9 @@ the after panel then says how many points fell outside.
 
 from __future__ import annotations
 
+import functools
 import io
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -172,13 +173,14 @@ def drawings(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[st
 
 @dataclass(frozen=True)
 class _Maps:
-    """Both maps' points in W (per LiDAR), which of them are objects (one classification, from
-    the calibrated map, so both show the same points), the floor height, the robot's
-    surroundings and the top view."""
+    """Both maps' points in W (per LiDAR), the x, y of those that are objects (one
+    classification, from the calibrated map, so both show the same points), the floor height,
+    the robot's surroundings and the top view."""
 
     before: list[Points]
     after: list[Points]
-    objects: list[NDArray[np.bool_]]
+    objects_before: list[NDArray[np.float64]]
+    objects_after: list[NDArray[np.float64]]
     floor_z: float
     surroundings: Extent
     extent: Extent
@@ -188,9 +190,13 @@ class _Maps:
         before, after = data.placed(after=False), data.placed(after=True)
         floor_z = floor_height(np.concatenate(after)) if any(len(p) for p in after) else 0.0
         objects = [p[:, 2] > floor_z + _OBJECT_MIN_HEIGHT_M for p in after]
+        objects_before, objects_after = (
+            [p[mask, :2] for p, mask in zip(placed, objects, strict=True)]
+            for placed in (before, after)
+        )
         window = robot_surroundings(data)
-        extent = _map_extent(window, before, after, objects)
-        return cls(before, after, objects, floor_z, window, extent)
+        extent = _map_extent(window, [*objects_before, *objects_after])
+        return cls(before, after, objects_before, objects_after, floor_z, window, extent)
 
 
 def robot_surroundings(data: ReportInput) -> Extent:
@@ -212,17 +218,8 @@ def map_extent(data: ReportInput) -> Extent:
     return _Maps.of(data).extent
 
 
-def _map_extent(
-    window: Extent,
-    before: list[Points],
-    after: list[Points],
-    objects: list[NDArray[np.bool_]],
-) -> Extent:
-    shown = [
-        placed[mask, :2][_inside(placed[mask, :2], window)]
-        for maps in (before, after)
-        for placed, mask in zip(maps, objects, strict=True)
-    ]
+def _map_extent(window: Extent, objects_xy: Sequence[NDArray[np.float64]]) -> Extent:
+    shown = [xy[_inside(xy, window)] for xy in objects_xy]
     x0, x1, y0, y1 = _top_extent(shown)
     return _square(max(x0, window[0]), min(x1, window[1]), max(y0, window[2]), min(y1, window[3]))
 
@@ -386,20 +383,6 @@ class Drawing:
         """The widest of `texts` on the image, pixels."""
         return max((t.get_window_extent().width for t in texts), default=0.0)
 
-    def lines(
-        self,
-        segments: Sequence[tuple[tuple[float, float], tuple[float, float]]],
-        colour: str,
-        *,
-        alpha: float = 1.0,
-        zorder: float = 2.0,
-    ) -> None:
-        from matplotlib.collections import LineCollection
-
-        self.add(
-            LineCollection(segments, colors=colour, linewidths=_LINE_PT, alpha=alpha, zorder=zorder)
-        )
-
     def panel(
         self,
         box: tuple[int, int, int, int],
@@ -426,19 +409,22 @@ class Drawing:
         xs, _ = panel.pixels(np.array([v for v, _ in xticks]), np.zeros(len(xticks)))
         _, ys = panel.pixels(np.zeros(len(yticks)), np.array([v for v, _ in yticks]))
         left, right, bottom, top = panel.left, panel.right, panel.bottom, panel.top
-        self.lines(
-            [((x, bottom), (x, top)) for x in xs] + [((left, y), (right, y)) for y in ys],
-            _GRID_COLOUR,
-            alpha=grid_alpha,
-            zorder=1.5,
-        )
-        self.lines(
-            [((x, bottom), (x, bottom - _TICK_PX)) for x in xs]
-            + [((left, y), (left - _TICK_PX, y)) for y in ys]
-            + [((left, bottom), (right, bottom)), ((right, bottom), (right, top))]
-            + [((right, top), (left, top)), ((left, top), (left, bottom))],
-            "black",
-            zorder=2.5,
+        from matplotlib.collections import LineCollection
+
+        grid = [((x, bottom), (x, top)) for x in xs] + [((left, y), (right, y)) for y in ys]
+        ticks = [((x, bottom), (x, bottom - _TICK_PX)) for x in xs] + [
+            ((left, y), (left - _TICK_PX, y)) for y in ys
+        ]
+        frame = [((left, bottom), (right, bottom)), ((right, bottom), (right, top))]
+        frame += [((right, top), (left, top)), ((left, top), (left, bottom))]
+        # One collection, the grid translucent under the black ticks and frame.
+        self.add(
+            LineCollection(
+                grid + ticks + frame,
+                colors=[(*_rgb(_GRID_COLOUR), grid_alpha)] * len(grid)
+                + [(0.0, 0.0, 0.0, 1.0)] * (len(ticks) + len(frame)),
+                linewidths=_LINE_PT,
+            )
         )
         if xtick_labels:
             for x, (_, label) in zip(xs, xticks, strict=True):
@@ -477,7 +463,7 @@ class Drawing:
         cells[..., 3] = 255
         up = ((np.arange(panel.height) + 0.5) * (rows / panel.height)).astype(int)
         across = ((np.arange(panel.width) + 0.5) * (cols / panel.width)).astype(int)
-        self.figure.add_artist(_pixels(panel.left, panel.bottom, cells[up][:, across]))
+        self.figure.add_artist(_pixels()(panel.left, panel.bottom, cells[up][:, across]))
 
     def title(self, panel: Panel, title: str, fontsize: float = _TITLE_PT) -> None:
         """`title` centred above `panel` (6 pt above it, as matplotlib's axes titles)."""
@@ -534,19 +520,26 @@ class Drawing:
             label.set_position((x + handle + gap, y))
 
 
-def _pixels(left: int, bottom: int, rgba: NDArray[np.uint8]) -> Artist:
-    """An artist that puts the (rows, cols, 4) `rgba` image (first row at the bottom) on the
-    canvas pixel for pixel, its lower left corner at pixel `left`, `bottom`."""
+@functools.cache
+def _pixels() -> Callable[[int, int, NDArray[np.uint8]], Artist]:
+    """The class of an artist that puts a (rows, cols, 4) RGBA image (first row at the bottom)
+    on the canvas pixel for pixel, its lower left corner at a pixel (left, bottom). Made on
+    first use: matplotlib is imported only to draw, and subclassing `Artist` costs milliseconds
+    each time."""
     from matplotlib.artist import Artist
 
     class Pixels(Artist):
+        def __init__(self, left: int, bottom: int, rgba: NDArray[np.uint8]) -> None:
+            super().__init__()
+            self._at, self._rgba = (left, bottom), rgba
+
         def draw(self, renderer: RendererBase) -> None:
             if self.get_visible():
                 gc = renderer.new_gc()
-                renderer.draw_image(gc, left, bottom, rgba)
+                renderer.draw_image(gc, *self._at, self._rgba)
                 gc.restore()
 
-    return Pixels()
+    return Pixels
 
 
 def linear_ticks(low: float, high: float, bins: float) -> list[Tick]:
@@ -702,14 +695,12 @@ def _top_view(data: ReportInput, maps: _Maps) -> Drawing:
     # Two square panels side by side under the titles, as tall as the image allows.
     drawing = Drawing(1400, 780)
     size, bottom = 616, 55
-    shown_after = [p[m, :2] for p, m in zip(maps.after, maps.objects, strict=True)]
-    shown_before = [p[m, :2] for p, m in zip(maps.before, maps.objects, strict=True)]
     extent = maps.extent
     # Cells of 2 cm at least (the segmentation's voxel): sparse clouds still show surfaces.
     cells = int(min(_TOP_PIXELS, (extent[1] - extent[0]) / _MIN_CELL_M))
     for left, layers, placed, title in zip(
         (80, 1386 - size),
-        (shown_before, shown_after),
+        (maps.objects_before, maps.objects_after),
         (maps.before, maps.after),
         _panel_titles(data),
         strict=True,
@@ -741,8 +732,13 @@ def _side_view(data: ReportInput, maps: _Maps) -> Drawing:
     floor_z = maps.floor_z
     # Heights of both maps' points in the top view's box: a tilted failed map must not
     # stretch the panel either.
-    inside = [p[_inside(p[:, :2], maps.extent)] for p in (*maps.before, *maps.after)]
-    heights = np.concatenate([p[:, [0, 2]] for p in inside if len(p)] or [np.zeros((0, 2))])
+    # x and z of every point: views (every other column), copied only where selected.
+    xz_before, xz_after = [p[:, ::2] for p in maps.before], [p[:, ::2] for p in maps.after]
+    inside = [
+        xz[_inside(p, maps.extent)]
+        for xz, p in zip((*xz_before, *xz_after), (*maps.before, *maps.after), strict=True)
+    ]
+    heights = np.concatenate([xz for xz in inside if len(xz)] or [np.zeros((0, 2))])
     top = _dense_extent(
         heights, cell_m=0.05, margin_m=0.15, fallback=(x0, x1, floor_z, floor_z + 1)
     )[3]
@@ -751,7 +747,7 @@ def _side_view(data: ReportInput, maps: _Maps) -> Drawing:
     # Heights are stretched on screen: finer cells in z keep the floor a thin line.
     rows = int(min(_SIDE_ROWS, (extent[3] - extent[2]) / (_MIN_CELL_M / 2)))
     for bottom, placed, title in zip(
-        (321, 58), (maps.before, maps.after), _panel_titles(data), strict=True
+        (321, 58), (xz_before, xz_after), _panel_titles(data), strict=True
     ):
         after = bottom == 58
         panel = drawing.panel(
@@ -761,7 +757,7 @@ def _side_view(data: ReportInput, maps: _Maps) -> Drawing:
             ylabel="z (m)",
             xtick_labels=after,
         )
-        drawing.paste(panel, _density_image([p[:, [0, 2]] for p in placed], extent, cols, rows))
+        drawing.paste(panel, _density_image(placed, extent, cols, rows))
         drawing.title(panel, title)
     drawing.legend(drawing.panels[1], _lidar_keys(data.frames))
     drawing.suptitle(
