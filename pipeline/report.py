@@ -345,7 +345,7 @@ class Drawing:
 
     No matplotlib Axes: building and drawing their ticks and labels took most of the report's
     time (0.15-0.35 s per image for set 1), and their images are resampled onto the screen
-    (0.1 s per map panel) where `paste` copies pixels. The tick values still come from
+    (~0.1 s a map image) where `paste` copies pixels. The tick values still come from
     matplotlib's locators and every line and letter from its Agg renderer."""
 
     def __init__(self, width: int, height: int) -> None:
@@ -359,6 +359,7 @@ class Drawing:
         self.panels: list[Panel] = []
 
     def png(self) -> bytes:
+        """The image, drawn by Agg, as PNG."""
         buffer = io.BytesIO()
         # zlib level 1: these images are mostly flat colour, and level 6 (the default) spent a
         # third of the drawing time compressing them for a few per cent of size.
@@ -399,6 +400,8 @@ class Drawing:
     ) -> Panel:
         """A framed panel at `box` (left, bottom, width, height in pixels) spanning `extent`,
         with a grid at its ticks (`xticks`, `yticks`: matplotlib's choice when None)."""
+        from matplotlib.collections import LineCollection
+
         panel = Panel(*box, extent=extent)
         self.panels.append(panel)
         x0, x1, y0, y1 = extent
@@ -409,8 +412,6 @@ class Drawing:
         xs, _ = panel.pixels(np.array([v for v, _ in xticks]), np.zeros(len(xticks)))
         _, ys = panel.pixels(np.zeros(len(yticks)), np.array([v for v, _ in yticks]))
         left, right, bottom, top = panel.left, panel.right, panel.bottom, panel.top
-        from matplotlib.collections import LineCollection
-
         grid = [((x, bottom), (x, top)) for x in xs] + [((left, y), (right, y)) for y in ys]
         ticks = [((x, bottom), (x, bottom - _TICK_PX)) for x in xs] + [
             ((left, y), (left - _TICK_PX, y)) for y in ys
