@@ -227,17 +227,18 @@ def _map_extent(window: Extent, objects_xy: Sequence[NDArray[np.float64]]) -> Ex
 def points_outside(points: Sequence[Points], extent: Extent) -> tuple[float, float]:
     """The share of the (N, 3) `points` whose x, y fall outside `extent` (a box), and how far
     the farthest of them lies from it (m)."""
-    xy = np.concatenate([p[:, :2] for p in points if len(p)] or [np.zeros((0, 2))])
-    if not len(xy):
+    total = sum(len(p) for p in points)
+    if not total:
         return 0.0, 0.0
-    # Distances of the points outside only: usually a few of hundreds of thousands.
-    outside = xy[~_inside(xy, extent)]
+    # Distances of the points outside only: usually a few of hundreds of thousands (selected
+    # from each array, not from a copy of them all).
+    outside = np.concatenate([p[~_inside(p, extent), :2] for p in points if len(p)])
     if not len(outside):
         return 0.0, 0.0
     low = np.array([extent[0], extent[2]])
     high = np.array([extent[1], extent[3]])
     distance = np.linalg.norm(np.maximum(0.0, np.maximum(low - outside, outside - high)), axis=1)
-    return len(outside) / len(xy), float(distance.max())
+    return len(outside) / total, float(distance.max())
 
 
 def _inside(xy: NDArray[np.float64], extent: Extent) -> NDArray[np.bool_]:
