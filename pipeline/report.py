@@ -78,13 +78,18 @@ class ReportInput:
     def placed(self, after: bool) -> list[Points]:
         """Each LiDAR's points of every stop in W, (sum N_j, 3) per LiDAR."""
         poses = self.T_W_lidar_after if after else self.T_W_lidar_before
-        return [
-            np.concatenate(
-                [c @ T[:3, :3].T + T[:3, 3] for c, T in zip(row, poses[i], strict=True)]
-                or [np.zeros((0, 3))]
-            )
-            for i, row in enumerate(self.clouds)
-        ]
+        maps = []
+        for row, T_row in zip(self.clouds, poses, strict=True):
+            # Written in place, stop by stop: no temporaries per stop, no copy to join them.
+            placed = np.empty((sum(len(c) for c in row), 3))
+            start = 0
+            for cloud, T in zip(row, T_row, strict=True):
+                part = placed[start : start + len(cloud)]
+                np.matmul(cloud, T[:3, :3].T, out=part)
+                part += T[:3, 3]
+                start += len(cloud)
+            maps.append(placed)
+        return maps
 
 
 def map_poses(
