@@ -339,6 +339,32 @@ def test_the_error_curve_ends_at_the_reported_metric_or_says_why_not(
     assert convergence_note(replace(truth_input, error_per_iteration=())) is None
 
 
+def error_axis_labels(data: ReportInput) -> dict[str, float]:
+    """The error curve's y tick labels and their heights (pixels from the bottom)."""
+    drawing = drawings(data, names=["error"])["error"]
+    (panel,) = drawing.panels
+    return {
+        t.get_text(): t.get_position()[1]
+        for t in drawing.figure.texts
+        if t.get_position()[0] < panel.left and t.get_rotation() == 0
+    }
+
+
+def test_the_error_axis_is_logarithmic_past_a_factor_20_and_labelled_in_mm(
+    truth_input: ReportInput,
+) -> None:
+    # 91.2 -> 1.5 mm: a log axis, ticks at 1, 2 and 5 x 10^k, a decade the same height anywhere.
+    log = error_axis_labels(truth_input)
+    assert list(log) == ["2", "5", "10", "20", "50", "100"]
+    assert log["20"] - log["2"] == pytest.approx(log["100"] - log["10"], abs=0.5)
+    # 12.4 -> 10.1 mm: linear, evenly spaced.
+    narrow = replace(truth_input, error_per_iteration=(0.0124, 0.0113, 0.0105))
+    linear = error_axis_labels(replace(narrow, metric_error_final=0.0101))
+    assert list(linear) == ["10.0", "10.5", "11.0", "11.5", "12.0", "12.5"]
+    steps = np.diff(list(linear.values()))
+    np.testing.assert_allclose(steps, steps[0], atol=0.5)
+
+
 def test_grid_counts_are_histogram2d_counts_edges_and_outside_included() -> None:
     rng = np.random.default_rng(3)
     extent = (-1.0, 2.0, 0.5, 1.5)
