@@ -7,27 +7,36 @@ points enter both (the floor is hidden from above, where it would only cover the
 view is where the robot was: around its path, as far as its LiDARs reach, so that a calibration
 that diverged (points thrown tens of metres away) cannot shrink the robot's surroundings to a dot;
 the after panel then says how many points fell outside.
+
+What the images show is here; how they are drawn (a matplotlib figure laid out in pixels: frames,
+ticks, labels, legends, pasted images, PNG) is `pipeline.report_canvas`.
 """
 
 from __future__ import annotations
 
-import functools
-import io
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.problem import CalibrationProblem
+from pipeline.report_canvas import (
+    FONT_PT,
+    PX_PER_PT,
+    Drawing,
+    Extent,
+    LegendKey,
+    Panel,
+    Tick,
+    integer_ticks,
+    log_ticks,
+    rgb,
+)
 from pipeline.transforms import Matrix4, Points, invert
 
 if TYPE_CHECKING:
-    from matplotlib.artist import Artist
-    from matplotlib.backend_bases import RendererBase
-    from matplotlib.text import Text
-
     from pipeline.calibrate import CalibrationResult
 
 REPORT_IMAGES: tuple[str, ...] = ("map-top", "map-side", "error")
@@ -47,7 +56,6 @@ LIDAR_COLOURS: tuple[str, ...] = (
 reference first) gets colour i, in these images and on the dashboard."""
 
 _OBJECT_MIN_HEIGHT_M = 0.05
-_DPI = 100
 # Density pixels per panel: about one per screen pixel of the 14-inch-wide figures at 100 dpi.
 _TOP_PIXELS = 560
 _SIDE_COLS, _SIDE_ROWS = 1200, 220
@@ -176,6 +184,22 @@ def drawings(data: ReportInput, names: Sequence[str] = REPORT_IMAGES) -> dict[st
     return {name: make[name]() for name in REPORT_IMAGES if name in names}
 
 
+def load_renderer() -> None:
+    """Import the matplotlib modules `render` draws with, once per process.
+
+    They cost more CPU than drawing set 1's three images (about 0.4 s of import on an idle
+    core, twice that on a loaded one). A process that renders many reports (the service's
+    pool children, forked from a server that preloads the job module) calls this once up
+    front instead of paying it inside its first run. Idempotent; `render` works without it.
+    """
+    import matplotlib.backends.backend_agg
+    import matplotlib.collections
+    import matplotlib.figure
+    import matplotlib.lines
+    import matplotlib.patches
+    import matplotlib.ticker  # noqa: F401
+
+
 @dataclass(frozen=True)
 class _Maps:
     """Both maps' points in W (per LiDAR), the x, y of those that are objects (one
@@ -264,305 +288,7 @@ def floor_height(points: Points, bin_m: float = 0.01) -> float:
     return float((edges[k] + edges[k + 1]) / 2)
 
 
-# -- drawing ---------------------------------------------------------------------------------------
-
-Extent = tuple[float, float, float, float]
-"""(x0, x1, y0, y1) of a panel, metres."""
-
-_FONT_PT = 10
-_TITLE_PT = 12
-_PX_PER_PT = _DPI / 72
-_LINE_PT = 0.8
-# matplotlib's defaults: ticks 3.5 pt long, their labels 3.5 pt beyond, axis labels 4 pt further.
-_TICK_PX = 3.5 * _PX_PER_PT
-_TICK_LABEL_PX = _TICK_PX + 3.5 * _PX_PER_PT
-_AXIS_LABEL_PAD_PX = 4 * _PX_PER_PT
-_GRID_COLOUR = "#b0b0b0"
-
-
-def load_renderer() -> None:
-    """Import the matplotlib modules `render` draws with, once per process.
-
-    They cost more CPU than drawing set 1's three images (about 0.4 s of import on an idle
-    core, twice that on a loaded one). A process that renders many reports (the service's
-    pool children, forked from a server that preloads the job module) calls this once up
-    front instead of paying it inside its first run. Idempotent; `render` works without it.
-    """
-    import matplotlib.backends.backend_agg
-    import matplotlib.collections
-    import matplotlib.figure
-    import matplotlib.lines
-    import matplotlib.patches
-    import matplotlib.ticker  # noqa: F401
-
-
-@dataclass(frozen=True)
-class Panel:
-    """A plot on a `Drawing`: its box in pixels from the image's lower left (matplotlib's display
-    coordinates) and the data range `extent` it spans."""
-
-    left: int
-    bottom: int
-    width: int
-    height: int
-    extent: Extent
-
-    @property
-    def right(self) -> int:
-        return self.left + self.width
-
-    @property
-    def top(self) -> int:
-        return self.bottom + self.height
-
-    def pixels(
-        self, x: NDArray[np.float64], y: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Where data coordinates `x`, `y` lie on the image, pixels from its lower left."""
-        x0, x1, y0, y1 = self.extent
-        return (
-            self.left + (np.asarray(x, dtype=np.float64) - x0) * (self.width / (x1 - x0)),
-            self.bottom + (np.asarray(y, dtype=np.float64) - y0) * (self.height / (y1 - y0)),
-        )
-
-    def point(self, x: float, y: float) -> tuple[float, float]:
-        px, py = self.pixels(np.array([x]), np.array([y]))
-        return float(px[0]), float(py[0])
-
-
-@dataclass(frozen=True)
-class LegendKey:
-    """One legend entry: a filled swatch of `colour`, or a line of `linestyle` (and `marker`)."""
-
-    label: str
-    colour: str
-    linestyle: Literal["-", "--"] | None = None
-    marker: str = ""
-
-
-Tick = tuple[float, str]
-"""A tick's value (data units) and its label."""
-
-
-class Drawing:
-    """One report image, `width` x `height` pixels: a matplotlib figure without Axes, laid out
-    in pixels, whose maps are RGB images composed in numpy (`paste`) under lines and text
-    (frames, ticks, grids, labels, legends, curves).
-
-    No matplotlib Axes: building and drawing their ticks and labels took most of the report's
-    time (0.15-0.35 s per image for set 1), and their images are resampled onto the screen
-    (~0.1 s a map image) where `paste` copies pixels. The tick values still come from
-    matplotlib's locators and every line and letter from its Agg renderer."""
-
-    def __init__(self, width: int, height: int) -> None:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        # No pyplot: no global figure registry, safe in worker threads and processes.
-        self.figure = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI)
-        # Agg's: texts measure themselves with its renderer (`widest`).
-        FigureCanvasAgg(self.figure)
-        self.panels: list[Panel] = []
-
-    def png(self) -> bytes:
-        """The image, drawn by Agg, as PNG."""
-        buffer = io.BytesIO()
-        # zlib level 1: these images are mostly flat colour, and level 6 (the default) spent a
-        # third of the drawing time compressing them for a few per cent of size.
-        self.figure.savefig(buffer, format="png", pil_kwargs={"compress_level": 1})
-        return buffer.getvalue()
-
-    def add(self, artist: Artist) -> None:
-        """Add `artist`, whose coordinates are pixels from the image's lower left."""
-        from matplotlib.transforms import IdentityTransform
-
-        artist.set_transform(IdentityTransform())
-        self.figure.add_artist(artist)
-
-    def text(self, x: float, y: float, text: str, **style: Any) -> Text:
-        """`text` at pixel `x`, `y` (from the lower left); `style`: `Text`'s properties."""
-        from matplotlib.transforms import IdentityTransform
-
-        style.setdefault("fontsize", _FONT_PT)
-        return self.figure.text(x, y, text, transform=IdentityTransform(), **style)
-
-    def widest(self, texts: Sequence[Text]) -> float:
-        """The widest of `texts` on the image, pixels."""
-        return max((t.get_window_extent().width for t in texts), default=0.0)
-
-    def panel(
-        self,
-        box: tuple[int, int, int, int],
-        extent: Extent,
-        *,
-        xlabel: str | None = None,
-        ylabel: str | None = None,
-        xticks: Sequence[Tick] | None = None,
-        yticks: Sequence[Tick] | None = None,
-        xtick_labels: bool = True,
-        ytick_labels: bool = True,
-        grid_alpha: float = 0.25,
-        ylabel_pt: float = _FONT_PT,
-    ) -> Panel:
-        """A framed panel at `box` (left, bottom, width, height in pixels) spanning `extent`,
-        with a grid at its ticks (`xticks`, `yticks`: matplotlib's choice when None)."""
-        from matplotlib.collections import LineCollection
-
-        panel = Panel(*box, extent=extent)
-        self.panels.append(panel)
-        x0, x1, y0, y1 = extent
-        if xticks is None:
-            xticks = linear_ticks(x0, x1, panel.width / _PX_PER_PT / (3 * _FONT_PT))
-        if yticks is None:
-            yticks = linear_ticks(y0, y1, panel.height / _PX_PER_PT / (2 * _FONT_PT))
-        xs, _ = panel.pixels(np.array([v for v, _ in xticks]), np.zeros(len(xticks)))
-        _, ys = panel.pixels(np.zeros(len(yticks)), np.array([v for v, _ in yticks]))
-        left, right, bottom, top = panel.left, panel.right, panel.bottom, panel.top
-        grid = [((x, bottom), (x, top)) for x in xs] + [((left, y), (right, y)) for y in ys]
-        ticks = [((x, bottom), (x, bottom - _TICK_PX)) for x in xs] + [
-            ((left, y), (left - _TICK_PX, y)) for y in ys
-        ]
-        frame = [((left, bottom), (right, bottom)), ((right, bottom), (right, top))]
-        frame += [((right, top), (left, top)), ((left, top), (left, bottom))]
-        # One collection, the grid translucent under the black ticks and frame.
-        self.add(
-            LineCollection(
-                grid + ticks + frame,
-                colors=[(*_rgb(_GRID_COLOUR), grid_alpha)] * len(grid)
-                + [(0.0, 0.0, 0.0, 1.0)] * (len(ticks) + len(frame)),
-                linewidths=_LINE_PT,
-            )
-        )
-        if xtick_labels:
-            for x, (_, label) in zip(xs, xticks, strict=True):
-                self.text(x, bottom - _TICK_LABEL_PX, label, ha="center", va="top")
-        labels = (
-            [
-                self.text(left - _TICK_LABEL_PX, y, label, ha="right", va="center_baseline")
-                for y, (_, label) in zip(ys, yticks, strict=True)
-            ]
-            if ytick_labels
-            else []
-        )
-        if xlabel is not None:
-            # Below the tick labels (about 1.2 lines of the font).
-            below = _TICK_LABEL_PX + 1.2 * _FONT_PT * _PX_PER_PT + _AXIS_LABEL_PAD_PX
-            self.text((left + right) / 2, bottom - below, xlabel, ha="center", va="top")
-        if ylabel is not None:
-            beside = _TICK_LABEL_PX + self.widest(labels) + _AXIS_LABEL_PAD_PX
-            self.text(
-                left - beside,
-                (bottom + top) / 2,
-                ylabel,
-                ha="right",
-                va="center",
-                rotation=90,
-                fontsize=ylabel_pt,
-            )
-        return panel
-
-    def paste(self, panel: Panel, image: NDArray[np.float64]) -> None:
-        """Fill `panel` with the (rows, cols, 3) RGB `image` in [0, 1] (row 0 at the bottom of
-        its extent): each screen pixel takes the cell under its centre (nearest neighbour)."""
-        rows, cols, _ = image.shape
-        cells = np.empty((rows, cols, 4), dtype=np.uint8)
-        cells[..., :3] = np.round(image * 255)
-        cells[..., 3] = 255
-        up = ((np.arange(panel.height) + 0.5) * (rows / panel.height)).astype(int)
-        across = ((np.arange(panel.width) + 0.5) * (cols / panel.width)).astype(int)
-        self.figure.add_artist(_pixels()(panel.left, panel.bottom, cells[up][:, across]))
-
-    def title(self, panel: Panel, title: str, fontsize: float = _TITLE_PT) -> None:
-        """`title` centred above `panel` (6 pt above it, as matplotlib's axes titles)."""
-        top = panel.top + 6 * _PX_PER_PT
-        self.text((panel.left + panel.right) / 2, top, title, ha="center", fontsize=fontsize)
-
-    def suptitle(self, title: str) -> None:
-        """`title` centred at the top of the image."""
-        width, height = self.figure.bbox.width, self.figure.bbox.height
-        self.text(width / 2, 0.98 * height, title, ha="center", va="top", fontsize=_TITLE_PT)
-
-    def legend(self, panel: Panel, keys: Sequence[LegendKey]) -> None:
-        """`keys` in a box at `panel`'s upper right (matplotlib's legend, its sizes in ems)."""
-        from matplotlib.lines import Line2D
-        from matplotlib.patches import Rectangle
-
-        em = _FONT_PT * _PX_PER_PT
-        pad, handle, gap, row = 0.4 * em, 2.0 * em, 0.8 * em, 1.5 * em
-        labels = [self.text(0, 0, key.label, va="center_baseline", zorder=6) for key in keys]
-        width = 2 * pad + handle + gap + self.widest(labels)
-        height = 2 * pad + len(keys) * row - 0.5 * em
-        right, top = panel.right - 0.5 * em, panel.top - 0.5 * em
-        left = right - width
-        self.add(
-            Rectangle(
-                (left, top - height),
-                width,
-                height,
-                facecolor=(1.0, 1.0, 1.0, 0.9),
-                edgecolor="0.8",
-                linewidth=_LINE_PT,
-                zorder=5,
-            )
-        )
-        for k, (key, label) in enumerate(zip(keys, labels, strict=True)):
-            y = top - pad - 0.5 * em - k * row
-            x = left + pad
-            if key.linestyle is None:
-                swatch: Artist = Rectangle(
-                    (x, y - 0.35 * em), handle, 0.7 * em, color=key.colour, zorder=6
-                )
-            else:
-                swatch = Line2D(
-                    [x, x + handle / 2, x + handle],
-                    [y, y, y],
-                    color=key.colour,
-                    linestyle=key.linestyle,
-                    marker=key.marker,
-                    markevery=[1],
-                    markersize=3,
-                    zorder=6,
-                )
-            self.add(swatch)
-            label.set_position((x + handle + gap, y))
-
-
-@functools.cache
-def _pixels() -> Callable[[int, int, NDArray[np.uint8]], Artist]:
-    """The class of an artist that puts a (rows, cols, 4) RGBA image (first row at the bottom)
-    on the canvas pixel for pixel, its lower left corner at a pixel (left, bottom). Made on
-    first use: matplotlib is imported only to draw, and subclassing `Artist` costs milliseconds
-    each time."""
-    from matplotlib.artist import Artist
-
-    class Pixels(Artist):
-        def __init__(self, left: int, bottom: int, rgba: NDArray[np.uint8]) -> None:
-            super().__init__()
-            self._at, self._rgba = (left, bottom), rgba
-
-        def draw(self, renderer: RendererBase) -> None:
-            if self.get_visible():
-                gc = renderer.new_gc()
-                renderer.draw_image(gc, *self._at, self._rgba)
-                gc.restore()
-
-    return Pixels
-
-
-def linear_ticks(low: float, high: float, bins: float) -> list[Tick]:
-    """Ticks within [low, high] at matplotlib's "nice" steps (at most `bins` + 1 of them, never
-    more than 10, as its automatic locator), labelled with as many decimals as the step needs
-    and a true minus sign."""
-    from matplotlib.ticker import MaxNLocator
-
-    locator = MaxNLocator(nbins=max(1, min(9, int(bins))), steps=[1, 2, 2.5, 5, 10])
-    values = np.asarray(locator.tick_values(low, high), dtype=np.float64)
-    step = float(values[1] - values[0]) if len(values) > 1 else 1.0
-    slack = 1e-9 * step
-    values = values[(values >= low - slack) & (values <= high + slack)]
-    values = np.where(np.abs(values) < slack, 0.0, values)  # no "-0"
-    decimals = next(d for d in range(12) if np.allclose(np.round(values, d), values, atol=slack))
-    return [(float(v), f"{v:.{decimals}f}".replace("-", "\u2212")) for v in values]
+# -- the images ------------------------------------------------------------------------------------
 
 
 def _lidar_keys(frames: Sequence[str]) -> list[LegendKey]:
@@ -571,13 +297,13 @@ def _lidar_keys(frames: Sequence[str]) -> list[LegendKey]:
         for i, frame in enumerate(frames)
     ]
     if len(frames) > 1:
-        both = np.prod([_rgb(lidar_colour(i)) for i in range(len(frames))], axis=0)
+        both = np.prod([rgb(lidar_colour(i)) for i in range(len(frames))], axis=0)
         keys.append(LegendKey("LiDARs overlapping", _hex(both)))
     return keys
 
 
-def _hex(rgb: NDArray[np.float64]) -> str:
-    return "#" + "".join(f"{round(float(c) * 255):02x}" for c in rgb)
+def _hex(channels: NDArray[np.float64]) -> str:
+    return "#" + "".join(f"{round(float(c) * 255):02x}" for c in channels)
 
 
 def _density_image(
@@ -603,7 +329,7 @@ def _density_image(
         # What a pixel of each count lets through, looked up: the same values as computing it
         # per pixel, for a few thousand counts instead of every pixel (most of them empty).
         alpha = np.clip(np.log1p(np.arange(int(occupied.max()) + 1)) / full, 0.0, 1.0)
-        ink = 1.0 - np.asarray(_rgb(lidar_colour(i)))
+        ink = 1.0 - np.asarray(rgb(lidar_colour(i)))
         image *= (1.0 - alpha[:, None] * ink)[counts]
     return image
 
@@ -623,14 +349,6 @@ def grid_counts(
     inside = (ix >= 0) & (ix < cols) & (iy >= 0) & (iy < rows)
     cells = np.bincount(ix[inside] * rows + iy[inside], minlength=cols * rows)
     return cells.reshape(cols, rows)
-
-
-def _rgb(colour: str) -> tuple[float, float, float]:
-    return (
-        int(colour[1:3], 16) / 255,
-        int(colour[3:5], 16) / 255,
-        int(colour[5:7], 16) / 255,
-    )
 
 
 def _dense_extent(
@@ -820,14 +538,14 @@ def _error_curve(data: ReportInput) -> Drawing:
             axis = np.where(errors > 0, np.log10(errors), np.nan)
             final_axis = np.log10(final_mm) if final_mm > 0 else np.nan
         low, high = _with_margins(np.log10(values[values > 0]))
-        yticks: list[Tick] | None = _log_ticks(low, high)
+        yticks: list[Tick] | None = log_ticks(low, high)
     else:
         axis, final_axis = errors, final_mm
         low, high = _with_margins(values) if len(values) else (0.0, 1.0)
         yticks = None
     n = len(errors)
     x0, x1 = _with_margins(np.arange(n, dtype=np.float64)) if n else (0.0, 1.0)
-    xticks = _integer_ticks(x0, x1, box[2] / _PX_PER_PT / (3 * _FONT_PT))
+    xticks = integer_ticks(x0, x1, box[2] / PX_PER_PT / (3 * FONT_PT))
     panel = drawing.panel(
         box,
         (x0, x1, low, high),
@@ -865,7 +583,7 @@ def _error_curve(data: ReportInput) -> Drawing:
             )
         if np.isfinite(ys[-1]):
             # 10 pt to the upper left of the last point, as an annotation offset in points.
-            offset = 10 * _PX_PER_PT
+            offset = 10 * PX_PER_PT
             drawing.text(
                 xs[-1] - offset,
                 ys[-1] + offset,
@@ -909,22 +627,6 @@ def _with_margins(values: NDArray[np.float64], margin: float = 0.05) -> tuple[fl
         return low - grow, high + grow
     grow = margin * (high - low)
     return low - grow, high + grow
-
-
-def _integer_ticks(low: float, high: float, bins: float) -> list[Tick]:
-    from matplotlib.ticker import MaxNLocator
-
-    locator = MaxNLocator(nbins=max(1, min(9, int(bins))), integer=True)
-    values = locator.tick_values(low, high)
-    return [(float(v), f"{v:.0f}".replace("-", "\u2212")) for v in values if low <= v <= high]
-
-
-def _log_ticks(low: float, high: float) -> list[Tick]:
-    """Ticks at 1, 2 and 5 x 10^k between 10^`low` and 10^`high`, at their log10 positions."""
-    from matplotlib.ticker import LogLocator
-
-    values = LogLocator(subs=(1.0, 2.0, 5.0)).tick_values(10**low, 10**high)
-    return [(float(np.log10(v)), f"{v:g}") for v in values if low <= np.log10(v) <= high]
 
 
 def _mm(value: float) -> str:
