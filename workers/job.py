@@ -68,6 +68,7 @@ _STAGE_PROGRESS = {
     "denoise": 0.06,
     "segmentation": 0.14,
     "rough_refinement": 0.2,
+    "global_alignment": 0.21,
     "optimisation": 0.22,
     "metric": 0.92,
     "observability": 0.94,

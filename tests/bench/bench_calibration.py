@@ -139,6 +139,7 @@ CONFIG_METHODS = (
     "surface_k30",
     "beam_fit",
     "fine_cauchy",
+    "global_alignment",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -162,6 +163,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_model"] = "beam_fit"
     elif method == "surface_k30":
         data["segmentation"]["surface_neighbours"] = 30
+    elif method == "global_alignment":
+        data["global_alignment"]["enabled"] = True
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method != "proposed":

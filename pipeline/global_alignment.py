@@ -1,0 +1,356 @@
+"""Global alignment: a search over the planar degrees of freedom that stage 3 leaves, before
+stage 4's local refinement (issue 13: convergence from initial errors up to 0.5 m / 15 deg).
+
+After stage 3 every LiDAR's roll, pitch and height over the floor are right; what is left is,
+per LiDAR, a rotation about the floor's normal and a shift along the floor. Stage 4 pairs each
+point with its nearest neighbour, so from a start further off than the objects' spacing it can
+settle on a wrong match (on a back-and-forth lane, a LiDAR one stop spacing along the lane: every
+object lands on the next one). Here the whole planar range is scored instead:
+
+1. The reference's own extrinsic (its planar part, `D` in the reference frame): a wrong one
+   conjugates every odometry step, so the reference's map is smeared by up to twice the error
+   wherever the robot has turned (a hand-eye problem). Score: the reference's object points of
+   every stop, placed with `T_G_ref[j] @ D`, counted where cells of the floor plane are occupied
+   by several stops (the sharper the map, the higher).
+2. Each other LiDAR's extrinsic relative to the reference (`E`, planar in the reference frame):
+   its object points placed with `T_G_ref[j] @ E @ T_ref_lidar` and counted where the
+   reference's map (after step 1) is occupied.
+
+Both are exhaustive on a coarse grid (rotation and shift), then finer around the best few. A
+candidate replaces the current estimate only where it scores `min_gain` times the current one:
+flat scores (the data cannot tell) keep what stage 3 left, and stage 4 refines either way.
+Every count is on the floor plane (2-D), because stage 3 has fixed the rest.
+
+Frames: G is the reference's frame at stop 0 (floor normal `n_G` there), `ref` the reference
+LiDAR's frame; a planar transform in `ref` rotates about `n_ref` (the floor normal seen from the
+reference) and shifts along the floor.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+
+from pipeline.geometry import Plane, tangent_basis
+from pipeline.transforms import Matrix4, Points, invert
+
+_FROZEN = ConfigDict(frozen=True, extra="forbid")
+
+
+class GlobalAlignmentConfig(BaseModel):
+    """The planar search before stage 4; lengths in metres, angles in degrees."""
+
+    model_config = _FROZEN
+
+    enabled: bool = False
+    max_translation_m: float = Field(
+        default=1.0,
+        gt=0,
+        description="half-width of the shifts searched: two extrinsics each off by 0.5 m put "
+        "one LiDAR up to 1 m from the reference",
+    )
+    max_rotation_deg: float = Field(default=30.0, gt=0, le=180)
+    cell_m: float = Field(
+        default=0.1, gt=0, description="cells of the floor plane in which maps are counted"
+    )
+    coarse_rotation_step_deg: float = Field(default=4.0, gt=0)
+    fine_rotation_step_deg: float = Field(default=1.0, gt=0)
+    points_per_cloud: int = Field(
+        default=60, ge=10, description="random object points per (LiDAR, stop) cloud scored"
+    )
+    search_reference: bool = Field(
+        default=False,
+        description="step 1, experimental: the reference's own planar extrinsic (hand-eye). Its "
+        "score (stops agreeing with each other) is weak where the reference sees few objects: "
+        "on seed 1020 it moved the reference 0.4 m the wrong way",
+    )
+    min_gain: float = Field(
+        default=1.25,
+        ge=1.0,
+        description="a candidate replaces the current estimate only where it scores this many "
+        "times as high",
+    )
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class PlanarMove:
+    """A search's outcome: the rotation (deg) and shift (m, along the floor) found, and the
+    scores of the current estimate and of the best candidate (counts of agreeing points)."""
+
+    rotation_deg: float
+    shift_m: tuple[float, float]
+    score_current: float
+    score_best: float
+    adopted: bool
+
+
+@dataclass(frozen=True)
+class GlobalAlignmentResult:
+    """Poses after the search (`T_G_ref` (J, 4, 4), `T_ref_lidar` (L, 4, 4)) and its moves:
+    the reference's own first, then one per other LiDAR."""
+
+    T_G_ref: NDArray[np.float64]
+    T_ref_lidar: NDArray[np.float64]
+    moves: tuple[PlanarMove, ...]
+
+
+@dataclass(frozen=True)
+class _Plane2D:
+    """The floor's coordinates: `basis_ref` (3, 2) along the floor in the reference frame (right
+    handed with `n_ref`), `Q` (J, 2, 2) each stop's rotation of those coordinates into G's floor
+    coordinates, `c` (J, 2) where each stop's reference origin lands there."""
+
+    basis_ref: NDArray[np.float64]
+    Q: NDArray[np.float64]
+    c: NDArray[np.float64]
+
+
+def _plane_2d(T_G_ref: NDArray[np.float64], floor_G: Plane) -> _Plane2D:
+    basis_G = tangent_basis(floor_G.normal)
+    n_ref = T_G_ref[0, :3, :3].T @ floor_G.normal
+    basis_ref = tangent_basis(n_ref)
+    Q = np.einsum("ia,jik,kb->jab", basis_G, T_G_ref[:, :3, :3], basis_ref)
+    c = T_G_ref[:, :3, 3] @ basis_G
+    return _Plane2D(basis_ref, Q, c)
+
+
+def _planar_transform(plane: _Plane2D, rotation_deg: float, shift: NDArray[np.float64]) -> Matrix4:
+    """The transform in the reference frame: a rotation about `n_ref`, a shift along the floor."""
+    basis = plane.basis_ref
+    normal = np.cross(basis[:, 0], basis[:, 1])
+    angle = np.radians(rotation_deg)
+    R2 = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    T = np.eye(4)
+    T[:3, :3] = basis @ R2 @ basis.T + np.outer(normal, normal)
+    T[:3, 3] = basis @ shift
+    return T
+
+
+def _rotations(psi_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    angle = np.radians(psi_deg)
+    cos, sin = np.cos(angle), np.sin(angle)
+    return np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], -2)
+
+
+@dataclass(frozen=True)
+class _Cloud2D:
+    """Sampled points of one LiDAR in the floor coordinates of the reference frame (`a`, (N, 2))
+    and the stop of each (N,)."""
+
+    a: NDArray[np.float64]
+    stop: NDArray[np.int64]
+
+
+def _sample(
+    clouds: Sequence[Points],
+    T_ref_lidar: Matrix4,
+    plane: _Plane2D,
+    count: int,
+    rng: np.random.Generator,
+) -> _Cloud2D:
+    rows, stops = [], []
+    for stop, points in enumerate(clouds):
+        if len(points) == 0:
+            continue
+        pick = rng.choice(len(points), size=min(count, len(points)), replace=False)
+        in_ref = points[pick] @ T_ref_lidar[:3, :3].T + T_ref_lidar[:3, 3]
+        rows.append(in_ref @ plane.basis_ref)
+        stops.append(np.full(len(pick), stop, dtype=np.int64))
+    if not rows:
+        return _Cloud2D(np.zeros((0, 2)), np.zeros(0, dtype=np.int64))
+    return _Cloud2D(np.concatenate(rows), np.concatenate(stops))
+
+
+def _placed(
+    cloud: _Cloud2D, plane: _Plane2D, psi_deg: float, shifts: NDArray[np.float64]
+) -> NDArray[np.float32]:
+    """(S, N, 2): the points in G's floor coordinates for the rotation `psi_deg` and every shift
+    of `shifts` (S, 2): u = Q_j (R(psi) a + t) + c_j."""
+    rotated = cloud.a @ _rotations(np.array([psi_deg]))[0].T
+    Q = plane.Q[cloud.stop]  # (N, 2, 2)
+    base = np.einsum("nab,nb->na", Q, rotated) + plane.c[cloud.stop]
+    out = np.empty((len(shifts), len(base), 2), dtype=np.float32)
+    for axis in range(2):
+        out[..., axis] = (
+            base[:, axis]
+            + shifts[:, :1] * Q[:, axis, 0][None, :]
+            + shifts[:, 1:] * Q[:, axis, 1][None, :]
+        )
+    return out
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """Occupied cells of the floor plane, one cell's margin around them."""
+
+    origin: NDArray[np.float64]
+    cell: float
+    occupied: NDArray[np.bool_]
+
+    def count(self, u: NDArray[np.float32]) -> NDArray[np.float64]:
+        """Points of `u` (..., N, 2) in occupied cells, per leading index. The grid's outermost
+        cells are never occupied, so points beyond it are clipped onto them."""
+        rows, cols = self.occupied.shape
+        scaled = (u - self.origin.astype(np.float32)) / np.float32(self.cell)
+        row = np.clip(scaled[..., 0], 0, rows - 1).astype(np.int32)
+        col = np.clip(scaled[..., 1], 0, cols - 1).astype(np.int32)
+        hit = self.occupied.ravel()[row * cols + col]
+        result: NDArray[np.float64] = np.count_nonzero(hit, axis=-1).astype(np.float64)
+        return result
+
+
+def _grid(u: NDArray[np.float64], cell: float) -> _Grid:
+    """The cells `u` (N, 2) occupy, dilated by one cell (a point near a cell's edge counts)."""
+    origin = u.min(axis=0) - 3 * cell
+    index = np.floor((u - origin) / cell).astype(np.int64)
+    shape = tuple(int(n) for n in index.max(axis=0) + 4)
+    occupied = np.zeros(shape, dtype=bool)
+    occupied[index[:, 0], index[:, 1]] = True
+    dilated = occupied.copy()
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            dilated |= np.roll(np.roll(occupied, dx, axis=0), dy, axis=1)
+    return _Grid(origin, cell, dilated)  # two empty cells around: the clip's landing strip
+
+
+def _sharpness(u: NDArray[np.float32], stop: NDArray[np.int64], cell: float) -> NDArray[np.float64]:
+    """For each candidate of `u` (C, N, 2): how many of the (cell, stop) pairs the points occupy
+    share their cell with another stop (sum over cells of stops there minus one): the sharper
+    the stops' maps agree, the higher."""
+    n_stops = int(stop.max()) + 1
+    index = np.floor(u / cell).astype(np.int64)
+    index -= index.min(axis=(0, 1), keepdims=True)
+    width = int(index[..., 1].max()) + 1
+    n_cells = (int(index[..., 0].max()) + 1) * width
+    candidate = np.arange(len(u), dtype=np.int64)[:, None]
+    cells = candidate * n_cells + index[..., 0] * width + index[..., 1]  # (C, N)
+    occupied = np.unique(cells * n_stops + stop)  # (candidate, cell, stop) once each
+    cell_keys, stops_there = np.unique(occupied // n_stops, return_counts=True)
+    shared = np.bincount(cell_keys // n_cells, weights=stops_there - 1, minlength=len(u))
+    result: NDArray[np.float64] = shared.astype(np.float64)
+    return result
+
+
+class _Scorer(Protocol):
+    """Scores of candidate (rotations (P,), shifts (S, 2)) as (P, S)."""
+
+    def __call__(
+        self, psi: NDArray[np.float64], shifts: NDArray[np.float64]
+    ) -> NDArray[np.float64]: ...
+
+
+@dataclass(frozen=True)
+class _AgainstMap:
+    cloud: _Cloud2D
+    plane: _Plane2D
+    grid: _Grid
+
+    def __call__(
+        self, psi: NDArray[np.float64], shifts: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        out = np.empty((len(psi), len(shifts)))
+        for p in range(len(psi)):
+            out[p] = self.grid.count(_placed(self.cloud, self.plane, float(psi[p]), shifts))
+        return out
+
+
+@dataclass(frozen=True)
+class _OwnStops:
+    cloud: _Cloud2D
+    plane: _Plane2D
+    cell: float
+
+    def __call__(
+        self, psi: NDArray[np.float64], shifts: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        out = np.empty((len(psi), len(shifts)))
+        for p in range(len(psi)):
+            u = _placed(self.cloud, self.plane, float(psi[p]), shifts)
+            out[p] = _sharpness(u, self.cloud.stop, self.cell)
+        return out
+
+
+def _search(
+    score: _Scorer, config: GlobalAlignmentConfig
+) -> tuple[float, NDArray[np.float64], float, float]:
+    """Best (rotation deg, shift (2,)) on a coarse grid, then a finer one around the best few;
+    with the score of the current estimate and of the best."""
+    cell = config.cell_m
+    half = config.max_translation_m
+    coarse = np.arange(-half, half + 1e-9, cell)
+    shifts = np.stack(np.meshgrid(coarse, coarse, indexing="ij"), -1).reshape(-1, 2)
+    psi = np.arange(
+        -config.max_rotation_deg, config.max_rotation_deg + 1e-9, config.coarse_rotation_step_deg
+    )
+    scores = score(psi, shifts)  # (P, S)
+    current = float(score(np.zeros(1), np.zeros((1, 2)))[0, 0])
+    best_psi, best_shift, best = 0.0, np.zeros(2), current
+    for flat in np.argsort(scores, axis=None)[::-1][:3]:
+        p, s = np.unravel_index(flat, scores.shape)
+        step = config.coarse_rotation_step_deg
+        fine_psi = psi[p] + np.arange(-step, step + 1e-9, config.fine_rotation_step_deg)
+        offsets = np.arange(-cell, cell + 1e-9, cell / 4)
+        fine_shifts = shifts[s] + np.stack(
+            np.meshgrid(offsets, offsets, indexing="ij"), -1
+        ).reshape(-1, 2)
+        fine = score(fine_psi, fine_shifts)
+        i, j = np.unravel_index(int(np.argmax(fine)), fine.shape)
+        if fine[i, j] > best:
+            best_psi, best_shift, best = float(fine_psi[i]), fine_shifts[j], float(fine[i, j])
+    return best_psi, best_shift, current, best
+
+
+def align_globally(
+    objects: Sequence[Sequence[Points]],
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    floor_G: Plane,
+    config: GlobalAlignmentConfig,
+) -> GlobalAlignmentResult:
+    """Search the reference's planar extrinsic, then each other LiDAR's, as the module says.
+    `objects[lidar][stop]`: object points (N, 3) in that LiDAR's frame, the reference first."""
+    rng = np.random.default_rng(config.seed)
+    plane = _plane_2d(T_G_ref, floor_G)
+    count = config.points_per_cloud
+    reference = _sample(objects[0], np.eye(4), plane, count, rng)
+    moves = []
+    D = np.eye(4)
+    if config.search_reference and len(set(reference.stop.tolist())) > 1:
+        psi, shift, current, best = _search(_OwnStops(reference, plane, config.cell_m), config)
+        adopted = best >= config.min_gain * current and best > 0
+        moves.append(PlanarMove(psi, (float(shift[0]), float(shift[1])), current, best, adopted))
+        if adopted:
+            D = _planar_transform(plane, psi, shift)
+    else:
+        moves.append(PlanarMove(0.0, (0.0, 0.0), 0.0, 0.0, False))
+    # The reference's map after D; T_G_ref[j] @ D places it (the common inv(D) on the left moves
+    # every map alike and is applied at the end).
+    own = moves[0]
+    D_psi = own.rotation_deg if own.adopted else 0.0
+    D_shift = np.array(own.shift_m) if own.adopted else np.zeros(2)
+    placed_ref = _placed(reference, plane, D_psi, D_shift[None])[0].astype(np.float64)
+    grid = _grid(placed_ref, config.cell_m) if len(placed_ref) else None
+    lidars = np.array(T_ref_lidar, dtype=np.float64)
+    D_inv = invert(D)
+    for lidar in range(1, len(objects)):
+        E = np.eye(4)
+        cloud = _sample(objects[lidar], T_ref_lidar[lidar], plane, count, rng)
+        if grid is None or len(cloud.a) == 0:
+            moves.append(PlanarMove(0.0, (0.0, 0.0), 0.0, 0.0, False))
+        else:
+            psi, shift, current, best = _search(_AgainstMap(cloud, plane, grid), config)
+            adopted = best >= config.min_gain * current and best > 0
+            moves.append(
+                PlanarMove(psi, (float(shift[0]), float(shift[1])), current, best, adopted)
+            )
+            if adopted:
+                E = _planar_transform(plane, psi, shift)
+        lidars[lidar] = D_inv @ E @ T_ref_lidar[lidar]
+    stops = np.einsum("ab,jbc,cd->jad", D_inv, T_G_ref, D)
+    return GlobalAlignmentResult(stops, lidars, tuple(moves))
