@@ -7,16 +7,16 @@ point with its nearest neighbour, so from a start further off than the objects' 
 settle on a wrong match (on a back-and-forth lane, a LiDAR one stop spacing along the lane: every
 object lands on the next one). Here the whole planar range is scored instead:
 
-1. The reference's own extrinsic (its planar part, `D` in the reference frame): a wrong one
-   conjugates every odometry step, so the reference's map is smeared by up to twice the error
-   wherever the robot has turned (a hand-eye problem). Score: the reference's object points of
-   every stop, placed with `T_G_ref[j] @ D`, counted where cells of the floor plane are occupied
-   by several stops (the sharper the map, the higher).
-2. Each other LiDAR's extrinsic relative to the reference (`E`, planar in the reference frame):
-   its object points placed with `T_G_ref[j] @ E @ T_ref_lidar` and counted where the
-   reference's map (after step 1) is occupied.
+Each other LiDAR's extrinsic relative to the reference (`E`, planar in the reference frame) is
+searched: its object points placed with `T_G_ref[j] @ E @ T_ref_lidar` and counted where the
+reference's map is occupied. The stop poses stay as stage 3 left them: a search of the
+reference's own planar extrinsic (the hand-eye problem a wrong one poses, smearing the
+reference's map wherever the robot turned) was tried, scoring how well the reference's stops
+agree with each other, and dropped: on routines that mostly drive straight its yaw is seen only
+through the drives' lengths, and on a synthetic scene and on seed 1020 it moved the reference the
+wrong way.
 
-Both are exhaustive on a coarse grid (rotation and shift), then finer around the best few. A
+The search is exhaustive on a coarse grid (rotation and shift), then finer around the best few. A
 candidate replaces the current estimate only where it scores `min_gain` times the current one:
 flat scores (the data cannot tell) keep what stage 3 left, and stage 4 refines either way.
 Every count is on the floor plane (2-D), because stage 3 has fixed the rest.
@@ -28,16 +28,15 @@ reference) and shifts along the floor.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from pipeline.geometry import Plane, tangent_basis
-from pipeline.transforms import Matrix4, Points, invert
+from pipeline.transforms import Matrix4, Points
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
 
@@ -63,12 +62,6 @@ class GlobalAlignmentConfig(BaseModel):
     points_per_cloud: int = Field(
         default=60, ge=10, description="random object points per (LiDAR, stop) cloud scored"
     )
-    search_reference: bool = Field(
-        default=False,
-        description="step 1, experimental: the reference's own planar extrinsic (hand-eye). Its "
-        "score (stops agreeing with each other) is weak where the reference sees few objects: "
-        "on seed 1020 it moved the reference 0.4 m the wrong way",
-    )
     min_gain: float = Field(
         default=1.25,
         ge=1.0,
@@ -92,8 +85,8 @@ class PlanarMove:
 
 @dataclass(frozen=True)
 class GlobalAlignmentResult:
-    """Poses after the search (`T_G_ref` (J, 4, 4), `T_ref_lidar` (L, 4, 4)) and its moves:
-    the reference's own first, then one per other LiDAR."""
+    """Poses after the search (`T_G_ref` (J, 4, 4), unchanged; `T_ref_lidar` (L, 4, 4)) and
+    its move of each non-reference LiDAR, in order."""
 
     T_G_ref: NDArray[np.float64]
     T_ref_lidar: NDArray[np.float64]
@@ -219,60 +212,21 @@ def _grid(u: NDArray[np.float64], cell: float) -> _Grid:
     return _Grid(origin, cell, dilated)  # two empty cells around: the clip's landing strip
 
 
-def _sharpness(u: NDArray[np.float32], stop: NDArray[np.int64], cell: float) -> NDArray[np.float64]:
-    """For each candidate of `u` (C, N, 2): how many of the (cell, stop) pairs the points occupy
-    share their cell with another stop (sum over cells of stops there minus one): the sharper
-    the stops' maps agree, the higher."""
-    n_stops = int(stop.max()) + 1
-    index = np.floor(u / cell).astype(np.int64)
-    index -= index.min(axis=(0, 1), keepdims=True)
-    width = int(index[..., 1].max()) + 1
-    n_cells = (int(index[..., 0].max()) + 1) * width
-    candidate = np.arange(len(u), dtype=np.int64)[:, None]
-    cells = candidate * n_cells + index[..., 0] * width + index[..., 1]  # (C, N)
-    occupied = np.unique(cells * n_stops + stop)  # (candidate, cell, stop) once each
-    cell_keys, stops_there = np.unique(occupied // n_stops, return_counts=True)
-    shared = np.bincount(cell_keys // n_cells, weights=stops_there - 1, minlength=len(u))
-    result: NDArray[np.float64] = shared.astype(np.float64)
-    return result
-
-
-class _Scorer(Protocol):
-    """Scores of candidate (rotations (P,), shifts (S, 2)) as (P, S)."""
-
-    def __call__(
-        self, psi: NDArray[np.float64], shifts: NDArray[np.float64]
-    ) -> NDArray[np.float64]: ...
-
-
 @dataclass(frozen=True)
-class _AgainstMap:
+class _Scorer:
+    """Scores of candidates (rotations (P,), shifts (S, 2)) as (P, S): `cloud` placed with each,
+    then `judge` (the (S, N, 2) placed points of one rotation -> (S,) scores)."""
+
     cloud: _Cloud2D
     plane: _Plane2D
-    grid: _Grid
+    judge: Callable[[NDArray[np.float32]], NDArray[np.float64]]
 
     def __call__(
         self, psi: NDArray[np.float64], shifts: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         out = np.empty((len(psi), len(shifts)))
         for p in range(len(psi)):
-            out[p] = self.grid.count(_placed(self.cloud, self.plane, float(psi[p]), shifts))
-        return out
-
-
-@dataclass(frozen=True)
-class _OwnStops:
-    cloud: _Cloud2D
-    plane: _Plane2D
-    cell: float
-
-    def __call__(
-        self, psi: NDArray[np.float64], shifts: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
-        out = np.empty((len(psi), len(shifts)))
-        for p in range(len(psi)):
-            u = _placed(self.cloud, self.plane, float(psi[p]), shifts)
-            out[p] = _sharpness(u, self.cloud.stop, self.cell)
+            out[p] = self.judge(_placed(self.cloud, self.plane, float(psi[p]), shifts))
         return out
 
 
@@ -313,44 +267,25 @@ def align_globally(
     floor_G: Plane,
     config: GlobalAlignmentConfig,
 ) -> GlobalAlignmentResult:
-    """Search the reference's planar extrinsic, then each other LiDAR's, as the module says.
-    `objects[lidar][stop]`: object points (N, 3) in that LiDAR's frame, the reference first."""
+    """Search each non-reference LiDAR's planar extrinsic against the reference's map, as the
+    module says. `objects[lidar][stop]`: object points (N, 3) in that LiDAR's frame, the
+    reference first; `floor_G`: stage 3's floor."""
     rng = np.random.default_rng(config.seed)
     plane = _plane_2d(T_G_ref, floor_G)
     count = config.points_per_cloud
     reference = _sample(objects[0], np.eye(4), plane, count, rng)
-    moves = []
-    D = np.eye(4)
-    if config.search_reference and len(set(reference.stop.tolist())) > 1:
-        psi, shift, current, best = _search(_OwnStops(reference, plane, config.cell_m), config)
-        adopted = best >= config.min_gain * current and best > 0
-        moves.append(PlanarMove(psi, (float(shift[0]), float(shift[1])), current, best, adopted))
-        if adopted:
-            D = _planar_transform(plane, psi, shift)
-    else:
-        moves.append(PlanarMove(0.0, (0.0, 0.0), 0.0, 0.0, False))
-    # The reference's map after D; T_G_ref[j] @ D places it (the common inv(D) on the left moves
-    # every map alike and is applied at the end).
-    own = moves[0]
-    D_psi = own.rotation_deg if own.adopted else 0.0
-    D_shift = np.array(own.shift_m) if own.adopted else np.zeros(2)
-    placed_ref = _placed(reference, plane, D_psi, D_shift[None])[0].astype(np.float64)
-    grid = _grid(placed_ref, config.cell_m) if len(placed_ref) else None
+    placed = _placed(reference, plane, 0.0, np.zeros((1, 2)))[0].astype(np.float64)
+    grid = _grid(placed, config.cell_m) if len(placed) else None
     lidars = np.array(T_ref_lidar, dtype=np.float64)
-    D_inv = invert(D)
+    moves = []
     for lidar in range(1, len(objects)):
-        E = np.eye(4)
         cloud = _sample(objects[lidar], T_ref_lidar[lidar], plane, count, rng)
         if grid is None or len(cloud.a) == 0:
             moves.append(PlanarMove(0.0, (0.0, 0.0), 0.0, 0.0, False))
-        else:
-            psi, shift, current, best = _search(_AgainstMap(cloud, plane, grid), config)
-            adopted = best >= config.min_gain * current and best > 0
-            moves.append(
-                PlanarMove(psi, (float(shift[0]), float(shift[1])), current, best, adopted)
-            )
-            if adopted:
-                E = _planar_transform(plane, psi, shift)
-        lidars[lidar] = D_inv @ E @ T_ref_lidar[lidar]
-    stops = np.einsum("ab,jbc,cd->jad", D_inv, T_G_ref, D)
-    return GlobalAlignmentResult(stops, lidars, tuple(moves))
+            continue
+        psi, shift, current, best = _search(_Scorer(cloud, plane, grid.count), config)
+        adopted = best >= config.min_gain * current and best > 0
+        moves.append(PlanarMove(psi, (float(shift[0]), float(shift[1])), current, best, adopted))
+        if adopted:
+            lidars[lidar] = _planar_transform(plane, psi, shift) @ T_ref_lidar[lidar]
+    return GlobalAlignmentResult(np.array(T_G_ref, dtype=np.float64), lidars, tuple(moves))

@@ -12,7 +12,7 @@ from pipeline.stages.state import CalibrationState, Detail
 
 
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
-    """Move `T_G_ref` and `T_ref_lidar` to the best-scoring planar candidates; needs stage 3's
+    """Move each non-reference `T_ref_lidar` to its best-scoring planar candidate; needs stage 3's
     floor (without it the stage is skipped)."""
     rough = state.floor_refinement
     if not config.global_alignment.enabled:
@@ -26,7 +26,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         rough.floor_G,
         config.global_alignment,
     )
-    frames = [lidar.frame for lidar in state.lidars]
+    frames = [lidar.frame for lidar in state.lidars[1:]]
     details: dict[str, Detail] = {"enabled": True}
     for frame, move in zip(frames, result.moves, strict=True):
         details[f"{frame}_rotation_deg"] = move.rotation_deg
