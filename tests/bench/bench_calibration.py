@@ -140,6 +140,7 @@ CONFIG_METHODS = (
     "beam_fit",
     "fine_cauchy",
     "global_alignment",
+    "kernel_30mm",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -165,6 +166,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_neighbours"] = 30
     elif method == "global_alignment":
         data["global_alignment"]["enabled"] = True
+    elif method == "kernel_30mm":
+        data["optimisation"]["kernel_scale_min_m"] = 0.03
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method != "proposed":
