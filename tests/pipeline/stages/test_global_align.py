@@ -1,0 +1,60 @@
+import dataclasses
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pipeline.config import PipelineConfig
+from pipeline.geometry import tangent_basis
+from pipeline.global_alignment import GlobalAlignmentConfig
+from pipeline.stages import global_align
+from pipeline.stages.runner import Listeners
+from pipeline.stages.state import CalibrationState
+from pipeline.transforms import pose_difference
+from tests.pipeline.calibration_data import box_prepared, box_problem, true_T_ref_lidar
+from tests.pipeline.optimisation.inputs import stage_inputs
+
+
+def _after_stage_3() -> CalibrationState:
+    inputs = stage_inputs()
+    rough = inputs.rough
+    _, segments = box_prepared()
+    return dataclasses.replace(
+        inputs.prepared,
+        segments=segments,
+        floor_refinement=rough,
+        T_G_ref=rough.T_G_ref,
+        T_ref_lidar=rough.T_ref_lidar,
+    )
+
+
+def test_off_by_default_and_then_the_state_is_untouched() -> None:
+    state = _after_stage_3()
+    outcome = global_align.run(state, PipelineConfig(), Listeners())
+    assert outcome.state is state
+    assert outcome.details == {"enabled": False}
+
+
+def test_enabled_it_reports_each_lidar_and_brings_a_far_one_near() -> None:
+    state = _after_stage_3()
+    _, truth = box_problem()
+    frames = tuple(lidar.frame for lidar in state.lidars)
+    T_true = true_T_ref_lidar(truth, frames)
+    # Stage 3 leaves the rear LiDAR near; push it 0.4 m and 8 deg off along the floor (about
+    # the floor normal seen from the reference).
+    rough = state.floor_refinement
+    assert rough is not None
+    up = state.T_G_ref[0, :3, :3].T @ rough.floor_G.normal
+    push = np.eye(4)
+    push[:3, :3] = Rotation.from_rotvec(np.radians(8.0) * up).as_matrix()
+    push[:3, 3] = 0.4 * tangent_basis(up)[:, 0]
+    far = state.T_ref_lidar.copy()
+    far[1] = push @ far[1]
+    state = dataclasses.replace(state, T_ref_lidar=far)
+    config = PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True))
+    outcome = global_align.run(state, config, Listeners())
+    assert outcome.details[f"{frames[1]}_adopted"] is True
+    assert set(outcome.details) >= {f"{frames[1]}_rotation_deg", f"{frames[1]}_score_gain"}
+    before = pose_difference(far[1], T_true[1])
+    after = pose_difference(outcome.state.T_ref_lidar[1], T_true[1])
+    assert before[0] > 0.3 and after[0] < 0.1 and after[1] < 2.0
+    np.testing.assert_allclose(outcome.state.T_G_ref, state.T_G_ref)
