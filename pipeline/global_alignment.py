@@ -117,8 +117,7 @@ def _planar_transform(plane: _Plane2D, rotation_deg: float, shift: NDArray[np.fl
     """The transform in the reference frame: a rotation about `n_ref`, a shift along the floor."""
     basis = plane.basis_ref
     normal = np.cross(basis[:, 0], basis[:, 1])
-    angle = np.radians(rotation_deg)
-    R2 = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    R2 = _rotations(np.array([rotation_deg]))[0]
     T = np.eye(4)
     T[:3, :3] = basis @ R2 @ basis.T + np.outer(normal, normal)
     T[:3, 3] = basis @ shift
