@@ -40,6 +40,21 @@ def robust_weight_and_cost(
     return np.ones_like(distance), 0.5 * distance**2
 
 
+_CHI3_MEDIAN = 1.5382
+"""Median of the norm of a 3-D standard normal vector (chi with 3 degrees of freedom)."""
+
+
+def robust_sigma(residuals: NDArray[np.float64]) -> float:
+    """The standard deviation of one component of `residuals` (n, 1) or (n, 3), from the median
+    of their norms, so outliers up to half of them do not inflate it: 1.4826 x the median
+    absolute value in 1-D, the median norm / 1.5382 in 3-D. NaN when there are none."""
+    if len(residuals) == 0:
+        return float("nan")
+    norms = np.linalg.norm(residuals, axis=1)
+    median = float(np.median(norms))
+    return 1.4826 * median if residuals.shape[1] == 1 else median / _CHI3_MEDIAN
+
+
 def _cross(a: Points, b: Points) -> Points:
     """Row-wise cross product of (N, 3) arrays; `np.cross` spends more on axis bookkeeping."""
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))

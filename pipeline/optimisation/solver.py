@@ -20,8 +20,8 @@ from pipeline.optimisation.assembly import (
 from pipeline.optimisation.association import Pairs, associate
 from pipeline.optimisation.config import OptimisationConfig
 from pipeline.optimisation.layout import ParameterLayout
-from pipeline.optimisation.objective import JointObjective
-from pipeline.optimisation.residuals import cost, point_residuals
+from pipeline.optimisation.objective import JointObjective, PlacedClouds
+from pipeline.optimisation.residuals import cost, point_residuals, robust_sigma
 from pipeline.optimisation.result import OptimisationResult
 from pipeline.transforms import Points
 
@@ -121,30 +121,43 @@ def _iterate(
     # The coarse phase only has to get close: it stops at ten times the tolerance.
     tolerance = 1.0 if last else 10.0
     run.converged = False
-    pairs = associate(objective, objective.place(run.stops, run.lidars))
+    placed = objective.place(run.stops, run.lidars)
+    pairs = associate(objective, placed)
     while run.iteration < config.max_iterations:
         run.iteration += 1
         run.errors.append(pairs.cross_error)
         # Graduated robustness: wide at first, while everything is far off, then tight so
         # that parts one LiDAR saw and the reference did not stop pulling.
+        floor = kernel_scale_floor(objective, pairs, placed)
         run.scale = max(
-            config.kernel_scale_min_m,
-            config.kernel_scale_initial_m * config.kernel_scale_decay ** (run.iteration - 1),
+            floor, config.kernel_scale_initial_m * config.kernel_scale_decay ** (run.iteration - 1)
         )
         run.stops, run.lidars, moved, run.damping = lm_step(
             objective, pairs, run.stops, run.lidars, run.scale, run.damping
         )
         run.history.append(run.lidars.copy())
-        pairs = associate(objective, objective.place(run.stops, run.lidars))
+        placed = objective.place(run.stops, run.lidars)
+        pairs = associate(objective, placed)
         if on_iteration is not None:
             on_iteration(run.iteration)
         if moved is None or (
             moved[0] < tolerance * config.translation_tolerance_m
             and moved[1] < tolerance * config.rotation_tolerance_deg
-            and (not last or run.scale <= config.kernel_scale_min_m)
+            and (not last or run.scale <= floor)
         ):
             run.converged = True
             break
+
+
+def kernel_scale_floor(objective: JointObjective, pairs: Pairs, placed: PlacedClouds) -> float:
+    """The smallest robust kernel scale (m) for the next step: `kernel_scale_min_m`, or
+    `kernel_scale_min_sigmas` robust standard deviations of the residuals of `pairs` at the poses
+    `placed` when that is wider."""
+    config = objective.config
+    if config.kernel_scale_min_sigmas is None or len(pairs.source) == 0:
+        return config.kernel_scale_min_m
+    sigma = robust_sigma(point_residuals(config.residual, pairs, placed))
+    return max(config.kernel_scale_min_m, config.kernel_scale_min_sigmas * sigma)
 
 
 def _result(

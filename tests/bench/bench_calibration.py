@@ -141,6 +141,7 @@ CONFIG_METHODS = (
     "fine_cauchy",
     "global_alignment",
     "kernel_30mm",
+    "kernel_sigmas",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -168,6 +169,8 @@ def method_config(method: str) -> PipelineConfig:
         data["global_alignment"]["enabled"] = True
     elif method == "kernel_30mm":
         data["optimisation"]["kernel_scale_min_m"] = 0.03
+    elif method == "kernel_sigmas":
+        data["optimisation"]["kernel_scale_min_sigmas"] = 3.8
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method != "proposed":

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from pipeline.optimisation import RobustLoss
-from pipeline.optimisation.residuals import robust_weight_and_cost
+from pipeline.optimisation.residuals import robust_sigma, robust_weight_and_cost
 
 
 @pytest.mark.parametrize("loss", ["cauchy", "geman_mcclure", "huber", "none"])
@@ -28,3 +28,15 @@ def test_geman_mcclure_stops_pulling_where_cauchy_still_pulls() -> None:
         pulls[loss] = pull[1] / pull[0]
     assert pulls["cauchy"] > 0.15
     assert pulls["geman_mcclure"] < 0.05
+
+
+@pytest.mark.parametrize("dimensions", [1, 3])
+def test_the_robust_sigma_of_residuals_ignores_a_third_of_outliers(dimensions: int) -> None:
+    rng = np.random.default_rng(0)
+    inliers = rng.normal(0.0, 0.008, size=(7000, dimensions))
+    outliers = rng.uniform(-0.5, 0.5, size=(3000, dimensions))
+    sigma = robust_sigma(np.vstack([inliers, outliers]))
+    # Wild outliers (0.29 m of spread) move the median out a little, never to their spread.
+    assert 0.008 < sigma < 0.008 * 2
+    assert robust_sigma(inliers) == pytest.approx(0.008, rel=0.05)
+    assert np.isnan(robust_sigma(np.zeros((0, dimensions))))

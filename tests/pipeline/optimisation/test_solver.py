@@ -4,6 +4,9 @@ import numpy as np
 
 from pipeline.geometry import log_se3
 from pipeline.optimisation import OptimisationConfig, OptimisationResult, optimise
+from pipeline.optimisation.association import associate
+from pipeline.optimisation.objective import JointObjective
+from pipeline.optimisation.solver import kernel_scale_floor
 from pipeline.transforms import Points, invert, pose_difference
 from tests.pipeline.calibration_data import box_problem, true_T_ref_lidar
 from tests.pipeline.optimisation.inputs import StageInputs, stage_inputs
@@ -110,3 +113,38 @@ def test_points_on_a_surface_the_reference_never_saw_do_not_pull_in_the_final_ph
     assert OptimisationConfig().fine_robust_loss == "geman_mcclure"
     assert errors["geman_mcclure"] < 0.004
     assert errors["cauchy"] > 0.005  # the same data, the outliers pulling
+
+
+def test_the_kernel_never_gets_narrower_than_the_surfaces_scatter() -> None:
+    # Every object point moved along its normal by 8 mm of noise. A point pairs with its nearest
+    # neighbour, often one that the noise moved the same way, so the residuals scatter by the
+    # noise's order (here about 7 mm), not by sqrt(2) times it.
+    inputs = stage_inputs()
+    rng = np.random.default_rng(1)
+    noisy = [
+        [p + rng.normal(0.0, 0.008, size=(len(p), 1)) * n for p, n in zip(ps, ns, strict=True)]
+        for ps, ns in zip(inputs.objects, inputs.normals, strict=True)
+    ]
+    _, truth = box_problem()
+    T_true = true_T_ref_lidar(truth, tuple(lidar.frame for lidar in inputs.prepared.lidars))
+    config = OptimisationConfig(kernel_scale_min_sigmas=3.8)
+    result = _optimise(inputs, noisy, config=config)
+    assert pose_difference(T_true[1], result.T_ref_lidar[1])[0] < 0.01
+
+    def floor(objects: list[list[Points]], config: OptimisationConfig) -> float:
+        objective = JointObjective.build(
+            objects,
+            inputs.planes,
+            inputs.rough.floor_G,
+            len(result.T_G_ref),
+            config,
+            inputs.normals,
+        )
+        placed = objective.place(result.T_G_ref, result.T_ref_lidar)
+        return kernel_scale_floor(objective, associate(objective, placed), placed)
+
+    assert 3.8 * 0.005 < floor(noisy, config) < 3.8 * 0.012
+    # Less scatter, a narrower floor (the segmentation's surfaces, about 5 mm); without the
+    # option, the fixed floor.
+    assert floor(inputs.objects, config) < floor(noisy, config) - 0.005
+    assert floor(noisy, OptimisationConfig()) == config.kernel_scale_min_m
