@@ -142,6 +142,7 @@ CONFIG_METHODS = (
     "global_alignment",
     "kernel_30mm",
     "kernel_sigmas",
+    "surface_debias",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -171,6 +172,8 @@ def method_config(method: str) -> PipelineConfig:
         data["optimisation"]["kernel_scale_min_m"] = 0.03
     elif method == "kernel_sigmas":
         data["optimisation"]["kernel_scale_min_sigmas"] = 3.8
+    elif method == "surface_debias":
+        data["segmentation"]["surface_debias"] = "bootstrap"
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method != "proposed":
