@@ -13,14 +13,19 @@ its `k` nearest directions,
    neighbours also lie nearer and farther, is typical of its cell; a sheet of mixed returns in
    front of a wall is not).
 
-The parameters come from the LiDAR and the cloud, not from one simulator's tuning: `tau` is three
-range-noise sigmas, from the LiDAR model when the config gives it, else estimated from the cloud
-(the spread of range differences between beams that point the same way); the scan pattern (given,
-or estimated: a spinning LiDAR fires the same directions every scan, so a stop cloud holds exact
-repeats of each direction) picks `spread_ratio`, because a repetitive scan's neighbours are the
-same beam's other scans, whose typical spread is the range noise alone. The beam divergence needs
-no parameter: the test looks at ranges, not at how far from an edge a point lies, so any width of
-the smeared band is handled (measured on the randomised beams of `pipeline.synth.bleeding`).
+A repetitive scan (a spinning LiDAR) is judged instead by `repeats.pure_support_keep`: support
+only from distinct directions whose repeats agree within the noise (a mixed return repeats at one
+level scan after scan and would support itself here).
+
+The parameters come from the LiDAR and the cloud, not from one simulator's tuning: `tau` is the
+range-noise sigma times the two-sided Gaussian quantile of `false_alarm_rate` (3.9 sigmas for
+1e-4: the share of clean points that noise alone may push that far), the sigma from the LiDAR
+model when the config gives it, else estimated from the cloud (the spread of range differences
+between beams that point the same way); the scan pattern (given, or estimated: a spinning LiDAR
+fires the same directions every scan, so a stop cloud holds exact repeats of each direction)
+picks the repetitive test above. The beam divergence needs no parameter: the tests look at
+ranges, not at how far from an edge a point lies, so any width of the smeared band is handled
+as long as the `k` neighbouring directions reach across it.
 
 One kNN query on unit directions (float32), then vectorised counts: about the cost of SOR's query.
 """
@@ -29,11 +34,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.denoise.filters import KeepMask, Points, cell_medians
+from pipeline.denoise.repeats import group_directions, has_repeats, pure_support_keep
 from pipeline.problem import ScanPattern
 
 # Directions closer than this (radians) are the same beam fired again (float32 unit vectors
@@ -51,11 +58,22 @@ class RangeGapSettings:
     """The filter's parameters that do not depend on the LiDAR (see the module docstring)."""
 
     k: int = 16
-    noise_sigmas: float = 3.0
+    false_alarm_rate: float = 1e-4
+    """Share of clean points whose range noise alone may carry them `tau` away from their
+    surface: `tau` is the two-sided Gaussian quantile of this rate in range-noise sigmas (3.9
+    for 1e-4: a few false alarms in a 145k-point stop cloud; 3 sigmas gave hundreds)."""
+    purity_iqr_sigmas: float = 4.0
+    """Repetitive scans: a direction is pure (sees one surface) when the interquartile range of
+    its repeats is at most this many sigmas (a Gaussian's is 1.35: room for a few returns)."""
     support_share: float = 0.25
     side_share: float = 0.125
     spread_ratio_rosette: float = 8.0
     spread_ratio_repetitive: float = 3.0
+
+    @property
+    def tau_sigmas(self) -> float:
+        """`tau` in range-noise sigmas, from `false_alarm_rate`."""
+        return NormalDist().inv_cdf(1.0 - self.false_alarm_rate / 2.0)
 
 
 @dataclass(frozen=True)
@@ -113,14 +131,36 @@ def range_gap_keep(
     report = RangeGapReport(sigma, pattern, noise_estimated, pattern_estimated)
     if sigma <= 0.0:
         return np.ones(len(beams.ranges), dtype=np.bool_), report
-    tau = settings.noise_sigmas * sigma
+    tau = settings.tau_sigmas * sigma
+    if pattern is ScanPattern.REPETITIVE:
+        groups = group_directions(cloud)
+        if has_repeats(groups):
+            pure_iqr = settings.purity_iqr_sigmas * sigma
+            keep = pure_support_keep(
+                cloud, groups, k=settings.k, tau_m=tau, pure_iqr_m=pure_iqr, rows=rows
+            )
+            return keep, report
+    typical_beams = None if population is None else measured
+    return _gap_keep(beams, typical_beams, settings, tau, pattern), report
+
+
+def _gap_keep(
+    beams: _Beams,
+    population: _Beams | None,
+    settings: RangeGapSettings,
+    tau: float,
+    pattern: ScanPattern,
+) -> KeepMask:
+    """The generic test of the module docstring on the judged `beams`; the typical spread per
+    direction cell comes from `population` (default: the judged beams)."""
     k = settings.k
     diff = beams.range_diff
     support = np.count_nonzero(np.abs(diff) <= tau, axis=1)
     sides = np.minimum(np.count_nonzero(diff < -tau, axis=1), np.count_nonzero(diff > tau, axis=1))
     spread = _spread(beams)
+    measured = beams if population is None else population
     typical = cell_medians(
-        spread if population is None else _spread(measured),
+        spread if population is None else _spread(population),
         measured.units,
         math.radians(_CELL_DEG),
         min_count=k,
@@ -135,7 +175,7 @@ def range_gap_keep(
         & (sides >= settings.side_share * k)
         & (spread > ratio * typical(beams.units))
     )
-    return ~noise, report
+    return np.asarray(~noise, dtype=np.bool_)
 
 
 def _spread(beams: _Beams) -> NDArray[np.float64]:
