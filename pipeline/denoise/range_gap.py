@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from statistics import NormalDist
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -98,12 +99,13 @@ class RangeGapReport:
 @dataclass(frozen=True)
 class _Beams:
     """Per judged point: range (N,), unit direction (N, 3), and its `k` nearest directions'
-    range differences (N, k) and angles (N, k) (itself excluded)."""
+    range differences (N, k), angles (N, k) and rows in the cloud (N, k) (itself excluded)."""
 
     ranges: NDArray[np.float64]
     units: Points
     range_diff: NDArray[np.float64]
     angle: NDArray[np.float64]
+    index: NDArray[np.intp]
 
 
 def range_gap_keep(
@@ -121,8 +123,9 @@ def range_gap_keep(
     whole cloud) that the estimates and the typical spread per direction come from when only
     some points are judged; default: the judged points. The cloud needs more than
     `settings.k` points."""
-    beams = _beams(cloud, settings.k, rows)
-    measured = beams if population is None else _beams(cloud, settings.k, population)
+    sky = _directions(cloud)
+    beams = _beams(sky, settings.k, rows)
+    measured = beams if population is None else _beams(sky, settings.k, population)
     noise_estimated = range_noise_m is None
     sigma = estimate_range_noise(measured) if range_noise_m is None else range_noise_m
     pattern_estimated = pattern is None or pattern is ScanPattern.UNKNOWN
@@ -141,7 +144,8 @@ def range_gap_keep(
             )
             return keep, report
     typical_beams = None if population is None else measured
-    return _gap_keep(beams, typical_beams, settings, tau, pattern), report
+    noise = ~_gap_keep(beams, typical_beams, settings, tau, pattern)
+    return ~_well_supported(sky, beams, noise, settings.k, tau, settings.support_share), report
 
 
 def _gap_keep(
@@ -178,6 +182,34 @@ def _gap_keep(
     return np.asarray(~noise, dtype=np.bool_)
 
 
+def _well_supported(
+    sky: _Directions,
+    beams: _Beams,
+    noise: NDArray[np.bool_],
+    k: int,
+    tau: float,
+    support_share: float,
+) -> NDArray[np.bool_]:
+    """`noise` less the points with a neighbour within `tau` of their range that is itself well
+    supported (more than `support_share * k` of its neighbours within `tau`).
+
+    A surface seen at a slant, or near its own silhouette, leaves a point few neighbours at its
+    range; but those few continue the surface into points that have many. A mixed return's
+    neighbours at its range, where it has any, are mixed returns too, as poorly supported."""
+    candidates = np.flatnonzero(noise)
+    if len(candidates) == 0:
+        return noise
+    near = np.abs(beams.range_diff[candidates]) <= tau
+    rows, inverse = np.unique(beams.index[candidates], return_inverse=True)
+    neighbours = _beams(sky, k, rows)
+    support = np.count_nonzero(np.abs(neighbours.range_diff) <= tau, axis=1)
+    strong = support[inverse.reshape(near.shape)] > support_share * k
+    rescued = (near & strong).any(axis=1)
+    out = noise.copy()
+    out[candidates[rescued]] = False
+    return out
+
+
 def _spread(beams: _Beams) -> NDArray[np.float64]:
     """(N,) median |range difference| to the neighbouring directions over the range: how far
     the neighbours' ranges spread, in the angular units the scan's spacing has."""
@@ -210,27 +242,43 @@ def estimate_scan_pattern(beams: _Beams) -> ScanPattern:
     return ScanPattern.REPETITIVE if share >= _REPEAT_SHARE else ScanPattern.NON_REPETITIVE
 
 
-def _beams(cloud: Points, k: int, rows: NDArray[np.intp] | None) -> _Beams:
+@dataclass(frozen=True)
+class _Directions:
+    """The whole cloud as seen from the sensor: `ranges` (N,) metres, `units` (N, 3) unit
+    directions in the LiDAR frame, and a kd-tree over them (float32) for the kNN queries."""
+
+    ranges: NDArray[np.float64]
+    units: Points
+    tree: Any
+
+
+def _directions(cloud: Points) -> _Directions:
     from pykdtree.kdtree import KDTree
 
-    ranges_all = np.linalg.norm(cloud, axis=1)
-    units_all = cloud / np.where(ranges_all > 0.0, ranges_all, 1.0)[:, None]
-    directions = np.ascontiguousarray(units_all, dtype=np.float32)
-    query = directions if rows is None else directions[rows]
-    own = np.arange(len(cloud)) if rows is None else rows
-    chord, index = KDTree(directions, leafsize=32).query(query, k=k + 1)
+    ranges = np.linalg.norm(cloud, axis=1)
+    units = cloud / np.where(ranges > 0.0, ranges, 1.0)[:, None]
+    tree = KDTree(np.ascontiguousarray(units, dtype=np.float32), leafsize=32)
+    return _Directions(ranges, units, tree)
+
+
+def _beams(sky: _Directions, k: int, rows: NDArray[np.intp] | None) -> _Beams:
+    """The `k` nearest directions of the points `rows` (all when None), themselves excluded."""
+    own = np.arange(len(sky.ranges)) if rows is None else rows
+    query = np.ascontiguousarray(sky.units[own], dtype=np.float32)
+    chord, index = sky.tree.query(query, k=k + 1)
     # Repeated directions tie at distance 0, so the point itself need not come first: drop it
     # wherever it is (else the farthest neighbour).
     is_self = index == own[:, None]
     drop = np.where(is_self.any(axis=1), np.argmax(is_self, axis=1), k)
     keep = np.ones(index.shape, dtype=np.bool_)
     keep[np.arange(len(own)), drop] = False
-    index = index[keep].reshape(len(own), k)
+    index = index[keep].reshape(len(own), k).astype(np.intp)
     chord = chord[keep].reshape(len(own), k).astype(np.float64)
-    ranges = ranges_all[own]
+    ranges = sky.ranges[own]
     return _Beams(
         ranges=ranges,
-        units=units_all[own],
-        range_diff=ranges_all[index] - ranges[:, None],
+        units=sky.units[own],
+        range_diff=sky.ranges[index] - ranges[:, None],
         angle=2.0 * np.arcsin(np.clip(chord / 2.0, 0.0, 1.0)),
+        index=index,
     )
