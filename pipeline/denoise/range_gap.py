@@ -13,6 +13,12 @@ its `k` nearest directions,
    neighbours also lie nearer and farther, is typical of its cell; a sheet of mixed returns in
    front of a wall is not).
 
+A candidate is kept when a neighbour within `tau` of its range is itself well supported (a
+slanted surface or a silhouette leaves a point few neighbours at its range, but those continue
+into points with many), and when it lies within three range-noise sigmas of the floor plane in
+3D (issue 19's definition of a bleeding point: farther than that from every surface; a mixed
+return between an object's foot and the floor often is not).
+
 A repetitive scan (a spinning LiDAR) is judged instead by `repeats.pure_support_keep`: support
 only from distinct directions whose repeats agree within the noise (a mixed return repeats at one
 level scan after scan and would support itself here).
@@ -40,6 +46,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.denoise.centre import fit_floor_plane
 from pipeline.denoise.filters import KeepMask, Points, cell_medians
 from pipeline.denoise.repeats import group_directions, has_repeats, pure_support_keep
 from pipeline.problem import ScanPattern
@@ -63,6 +70,9 @@ class RangeGapSettings:
     """Share of clean points whose range noise alone may carry them `tau` away from their
     surface: `tau` is the two-sided Gaussian quantile of this rate in range-noise sigmas (3.9
     for 1e-4: a few false alarms in a 145k-point stop cloud; 3 sigmas gave hundreds)."""
+    surface_margin_sigmas: float = 3.0
+    """A candidate within this many range-noise sigmas of the floor plane (in 3D) is kept: issue
+    19's definition of a bleeding point (farther than three sigmas from every surface)."""
     purity_iqr_sigmas: float = 4.0
     """Repetitive scans: a direction is pure (sees one surface) when the interquartile range of
     its repeats is at most this many sigmas (a Gaussian's is 1.35: room for a few returns)."""
@@ -116,13 +126,15 @@ def range_gap_keep(
     pattern: ScanPattern | None = None,
     rows: NDArray[np.intp] | None = None,
     population: NDArray[np.intp] | None = None,
+    floor_plane: NDArray[np.float64] | None = None,
 ) -> tuple[KeepMask, RangeGapReport]:
     """Keep mask of the points `rows` of `cloud` (N, 3, sensor at the origin; all when None),
     and what it used. `range_noise_m` / `pattern`: the LiDAR's, when known; estimated from the
     cloud when None (or `pattern` UNKNOWN). `population`: the rows (e.g. a random sample of the
     whole cloud) that the estimates and the typical spread per direction come from when only
-    some points are judged; default: the judged points. The cloud needs more than
-    `settings.k` points."""
+    some points are judged; default: the judged points. `floor_plane`: `[a, b, c, d]` (unit
+    normal, LiDAR frame), the cloud's floor; fitted here (its largest plane) when None. The
+    cloud needs more than `settings.k` points."""
     sky = _directions(cloud)
     beams = _beams(sky, settings.k, rows)
     measured = beams if population is None else _beams(sky, settings.k, population)
@@ -135,17 +147,21 @@ def range_gap_keep(
     if sigma <= 0.0:
         return np.ones(len(beams.ranges), dtype=np.bool_), report
     tau = settings.tau_sigmas * sigma
+    noise: NDArray[np.bool_] | None = None
     if pattern is ScanPattern.REPETITIVE:
         groups = group_directions(cloud)
         if has_repeats(groups):
             pure_iqr = settings.purity_iqr_sigmas * sigma
-            keep = pure_support_keep(
+            noise = ~pure_support_keep(
                 cloud, groups, k=settings.k, tau_m=tau, pure_iqr_m=pure_iqr, rows=rows
             )
-            return keep, report
-    typical_beams = None if population is None else measured
-    noise = ~_gap_keep(beams, typical_beams, settings, tau, pattern)
-    return ~_well_supported(sky, beams, noise, settings.k, tau, settings.support_share), report
+    if noise is None:
+        typical_beams = None if population is None else measured
+        noise = ~_gap_keep(beams, typical_beams, settings, tau, pattern)
+        noise = _well_supported(sky, beams, noise, settings.k, tau, settings.support_share)
+    own = np.arange(len(cloud)) if rows is None else rows
+    margin = settings.surface_margin_sigmas * sigma
+    return ~_off_the_floor(cloud, own, noise, floor_plane, tau, margin), report
 
 
 def _gap_keep(
@@ -207,6 +223,35 @@ def _well_supported(
     rescued = (near & strong).any(axis=1)
     out = noise.copy()
     out[candidates[rescued]] = False
+    return out
+
+
+def _off_the_floor(
+    cloud: Points,
+    own: NDArray[np.intp],
+    noise: NDArray[np.bool_],
+    floor_plane: NDArray[np.float64] | None,
+    tau: float,
+    margin: float,
+) -> NDArray[np.bool_]:
+    """`noise` (over the rows `own` of `cloud`) less the points within `margin` (metres) of the
+    floor plane.
+
+    A mixed return between an object's foot and the floor lies off both along the beam, but
+    in 3D it may sit within the noise of the floor, where it harms nothing: issue 19 calls a
+    return bleeding only when it is farther than three range-noise sigmas from every surface.
+    Only the candidates are tested, so the margin is that definition, not a false-alarm quantile.
+    The floor is fitted (RANSAC, inliers within `tau`) when not given."""
+    candidates = np.flatnonzero(noise)
+    if len(candidates) == 0:
+        return noise
+    plane = fit_floor_plane(cloud, distance_m=tau) if floor_plane is None else floor_plane
+    if plane is None:
+        return noise
+    points = cloud[own[candidates]]
+    near = np.abs(points @ plane[:3] + plane[3]) <= margin
+    out = noise.copy()
+    out[candidates[near]] = False
     return out
 
 
