@@ -8,10 +8,9 @@ its `k` nearest directions,
 1. few return within `tau` of its own range (`support <= support_share * k`),
 2. some return nearer than its range minus `tau` and some farther than its range plus `tau`
    (`min(nearer, farther) >= side_share * k`: it lies between two surfaces), and
-3. the neighbours' range spread (median |range difference| over range) exceeds `spread_ratio`
-   times the typical spread of its direction cell (a surface seen at grazing incidence, whose
-   neighbours also lie nearer and farther, is typical of its cell; a sheet of mixed returns in
-   front of a wall is not).
+3. no smooth surface through it fits its neighbours' ranges within `tau`
+   (`slope.on_smooth_surface`: a surface seen at grazing incidence also has neighbours nearer
+   and farther, but on a plane with the point; a mixed return's neighbours are a step).
 
 A candidate is kept when a neighbour within `tau` of its range is itself well supported (a
 slanted surface or a silhouette leaves a point few neighbours at its range, but those continue
@@ -47,8 +46,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.denoise.centre import fit_floor_plane
-from pipeline.denoise.filters import KeepMask, Points, cell_medians
+from pipeline.denoise.filters import KeepMask, Points
 from pipeline.denoise.repeats import group_directions, has_repeats, pure_support_keep
+from pipeline.denoise.slope import on_smooth_surface
 from pipeline.problem import ScanPattern
 
 # Directions closer than this (radians) are the same beam fired again (float32 unit vectors
@@ -58,7 +58,6 @@ _REPEAT_RAD = 1e-5
 _REPEAT_SHARE = 0.5
 # |difference| of two draws of N(0, s^2): median 0.6745 * sqrt(2) * s.
 _MEDIAN_ABS_DIFF = 0.6745 * math.sqrt(2.0)
-_CELL_DEG = 10.0
 
 
 @dataclass(frozen=True)
@@ -78,8 +77,6 @@ class RangeGapSettings:
     its repeats is at most this many sigmas (a Gaussian's is 1.35: room for a few returns)."""
     support_share: float = 0.25
     side_share: float = 0.125
-    spread_ratio_rosette: float = 8.0
-    spread_ratio_repetitive: float = 3.0
 
     @property
     def tau_sigmas(self) -> float:
@@ -131,8 +128,8 @@ def range_gap_keep(
     """Keep mask of the points `rows` of `cloud` (N, 3, sensor at the origin; all when None),
     and what it used. `range_noise_m` / `pattern`: the LiDAR's, when known; estimated from the
     cloud when None (or `pattern` UNKNOWN). `population`: the rows (e.g. a random sample of the
-    whole cloud) that the estimates and the typical spread per direction come from when only
-    some points are judged; default: the judged points. `floor_plane`: `[a, b, c, d]` (unit
+    whole cloud) that the estimates come from when only some points are judged; default: the
+    judged points. `floor_plane`: `[a, b, c, d]` (unit
     normal, LiDAR frame), the cloud's floor; fitted here (its largest plane) when None. The
     cloud needs more than `settings.k` points."""
     sky = _directions(cloud)
@@ -156,46 +153,32 @@ def range_gap_keep(
                 cloud, groups, k=settings.k, tau_m=tau, pure_iqr_m=pure_iqr, rows=rows
             )
     if noise is None:
-        typical_beams = None if population is None else measured
-        noise = ~_gap_keep(beams, typical_beams, settings, tau, pattern)
+        noise = ~_gap_keep(sky, beams, settings, tau)
         noise = _well_supported(sky, beams, noise, settings.k, tau, settings.support_share)
     own = np.arange(len(cloud)) if rows is None else rows
     margin = settings.surface_margin_sigmas * sigma
     return ~_off_the_floor(cloud, own, noise, floor_plane, tau, margin), report
 
 
-def _gap_keep(
-    beams: _Beams,
-    population: _Beams | None,
-    settings: RangeGapSettings,
-    tau: float,
-    pattern: ScanPattern,
-) -> KeepMask:
-    """The generic test of the module docstring on the judged `beams`; the typical spread per
-    direction cell comes from `population` (default: the judged beams)."""
+def _gap_keep(sky: _Directions, beams: _Beams, settings: RangeGapSettings, tau: float) -> KeepMask:
+    """The generic test of the module docstring on the judged `beams`: few neighbours at the
+    point's range, some on either side, and not on a smooth surface through them."""
     k = settings.k
     diff = beams.range_diff
     support = np.count_nonzero(np.abs(diff) <= tau, axis=1)
     sides = np.minimum(np.count_nonzero(diff < -tau, axis=1), np.count_nonzero(diff > tau, axis=1))
-    spread = _spread(beams)
-    measured = beams if population is None else population
-    typical = cell_medians(
-        spread if population is None else _spread(population),
-        measured.units,
-        math.radians(_CELL_DEG),
-        min_count=k,
+    candidates = np.flatnonzero(
+        (support <= settings.support_share * k) & (sides >= settings.side_share * k)
     )
-    ratio = (
-        settings.spread_ratio_repetitive
-        if pattern is ScanPattern.REPETITIVE
-        else settings.spread_ratio_rosette
+    smooth = on_smooth_surface(
+        beams.units[candidates],
+        sky.units[beams.index[candidates]],
+        diff[candidates],
+        tau,
     )
-    noise = (
-        (support <= settings.support_share * k)
-        & (sides >= settings.side_share * k)
-        & (spread > ratio * typical(beams.units))
-    )
-    return np.asarray(~noise, dtype=np.bool_)
+    keep = np.ones(len(diff), dtype=np.bool_)
+    keep[candidates[~smooth]] = False
+    return keep
 
 
 def _well_supported(
@@ -253,16 +236,6 @@ def _off_the_floor(
     out = noise.copy()
     out[candidates[near]] = False
     return out
-
-
-def _spread(beams: _Beams) -> NDArray[np.float64]:
-    """(N,) median |range difference| to the neighbouring directions over the range: how far
-    the neighbours' ranges spread, in the angular units the scan's spacing has."""
-    k = beams.range_diff.shape[1]
-    safe = np.where(beams.ranges > 0.0, beams.ranges, 1.0)
-    # The median of k values by one partition (a full median costs a sort per row).
-    spread = np.partition(np.abs(beams.range_diff), k // 2, axis=1)[:, k // 2] / safe
-    return np.asarray(spread, dtype=np.float64)
 
 
 def estimate_range_noise(beams: _Beams) -> float:

@@ -66,7 +66,7 @@ def test_a_drawn_beam_outside_the_benchmark_draws() -> None:
     20-39): a Mid-70 rosette on boxes, 0.08 x 0.03 deg beam, uniform mixing. The filter gets the
     LiDAR model's range noise and scan pattern. Before the false-alarm tau, the well-supported
     neighbour and the floor's margin the pooled F here was 0.59 (0.65 with the tau alone, 0.76
-    with the neighbour); now 0.78."""
+    with the neighbour, 0.78 with the floor); now 0.81."""
     from pipeline.synth.bleeding import draw_bleeding_case
     from tests.pipeline.denoise.clouds import bleeding_stop_clouds
 
@@ -76,4 +76,4 @@ def test_a_drawn_beam_outside_the_benchmark_draws() -> None:
         for b in beams
     ]
     is_bleeding = np.concatenate([b.cloud.is_bleeding for b in beams])
-    assert f_score(np.concatenate(keep), is_bleeding) > 0.7
+    assert f_score(np.concatenate(keep), is_bleeding) > 0.75
