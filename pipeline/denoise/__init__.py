@@ -215,6 +215,7 @@ def denoise(
             pattern=scan_pattern,
             rows=rows,
             population=sample,
+            floor_plane=None if floor_plane is None else _unit_plane(floor_plane),
         )
         parameters = report.as_details()
     else:
@@ -294,6 +295,15 @@ def _judged_rows(
     size = min(cfg.population_points, len(cloud))
     sample = np.random.default_rng(cfg.seed).choice(len(cloud), size=size, replace=False)
     return np.flatnonzero(mask), np.sort(sample)
+
+
+def _unit_plane(plane: ArrayLike) -> NDArray[np.float64]:
+    """`[a, b, c, d]` scaled so that `(a, b, c)` is a unit normal (distances in metres)."""
+    values = np.asarray(plane, dtype=np.float64).reshape(4)
+    norm = float(np.linalg.norm(values[:3]))
+    if not np.isfinite(values).all() or norm < 1e-12:
+        raise BadInputError("the floor plane must be a finite [a, b, c, d] with a non-zero normal")
+    return np.asarray(values / norm, dtype=np.float64)
 
 
 def _untouched(cloud: Points, cfg: DenoiseConfig, start: float, note: str) -> DenoiseResult:

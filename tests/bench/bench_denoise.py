@@ -3,9 +3,11 @@
     .venv/bin/python -m tests.bench.bench_denoise [--scenes set1-box,set1-cylinder,set1-capsule]
         [--seeds 10,11] [--stop-step 2] [--repeats 5]
     .venv/bin/python -m tests.bench.bench_denoise --bleeding-draws 24 [--draw-stops 0,8]
+        [--first-draw 0]
 
 `--bleeding-draws N`: instead, the randomised bleeding models of `pipeline.synth.bleeding`
-(draws 0..N-1: beam, scan pattern, scene), every LiDAR at the stops `--draw-stops`, each filter
+(draws F..F+N-1 with F = `--first-draw`, default 0: beam, scan pattern, scene; e.g. draws 0-19 to
+judge changes by and 20-39 held out), every LiDAR at the stops `--draw-stops`, each filter
 judging every point: precision / recall / F per draw (pooled over its clouds), their mean and
 minimum, and CPU seconds per 100k points. `range_gap` runs twice: estimating the range noise and
 scan pattern from each cloud, and given the LiDAR model's.
@@ -190,14 +192,16 @@ def draw_filters(beam: BeamCloud) -> dict[str, Callable[[], DenoiseResult]]:
     return actions
 
 
-def bleeding_table(draws: int, stops: list[int]) -> str:
-    """Markdown: per draw, P / R / F of each filter; then mean and minimum F, seconds per 100k."""
+def bleeding_table(draws: int, stops: list[int], first: int = 0) -> str:
+    """Markdown: per draw (seeds `first`..`first + draws - 1`), P / R / F of each filter; then
+    mean and minimum F, seconds per 100k."""
     rows: list[str] = []
     scores: dict[str, list[float]] = defaultdict(list)
     cpu: dict[str, float] = defaultdict(float)
     points = 0
     labels: list[str] = []
-    for seed in range(draws):
+    seeds = range(first, first + draws)
+    for seed in seeds:
         case = draw_bleeding_case(seed)
         tallies: dict[str, Tally] = defaultdict(Tally)
         bleeding = size = 0
@@ -224,8 +228,8 @@ def bleeding_table(draws: int, stops: list[int]) -> str:
         )
         print(rows[-1], file=sys.stderr, flush=True)
     head = [
-        f"## Randomised bleeding models ({draws} draws, stops {stops}, every LiDAR, every point "
-        "judged)\n",
+        f"## Randomised bleeding models ({draws} draws from {first}, stops {stops}, every LiDAR, "
+        "every point judged)\n",
         "| draw | pattern | model | points | bleeding | "
         + " | ".join(f"{m} P / R / F" for m in labels)
         + " |",
@@ -235,7 +239,7 @@ def bleeding_table(draws: int, stops: list[int]) -> str:
         "\n| filter | mean F | min F | mean F rosette | mean F spinning | CPU s per 100k |",
         "|---|---:|---:|---:|---:|---:|",
     ]
-    patterns = [draw_bleeding_case(seed).pattern for seed in range(draws)]
+    patterns = [draw_bleeding_case(seed).pattern for seed in seeds]
     for label in labels:
         f = np.array(scores[label])
         by = {p: f[[q == p for q in patterns]].mean() for p in ("rosette", "spinning")}
@@ -257,10 +261,11 @@ def main() -> None:
     parser.add_argument("--timing-only", action="store_true", help="only the timing table")
     parser.add_argument("--bleeding-draws", type=int, default=0, help="randomised beam models")
     parser.add_argument("--draw-stops", default="0,8", help="stops of each draw's scene")
+    parser.add_argument("--first-draw", type=int, default=0, help="seed of the first draw")
     args = parser.parse_args()
     if args.bleeding_draws:
         stops = [int(s) for s in args.draw_stops.split(",") if s]
-        print(bleeding_table(args.bleeding_draws, stops))
+        print(bleeding_table(args.bleeding_draws, stops, args.first_draw))
         return
     scenes = [s for s in args.scenes.split(",") if s]
     seeds = [int(s) for s in args.seeds.split(",") if s]

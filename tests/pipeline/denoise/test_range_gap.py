@@ -59,3 +59,21 @@ def test_the_stage_reports_what_the_filter_used() -> None:
     judged = denoise(cloud, config, AXIS, judge=is_bleeding)
     assert judged.keep[~is_bleeding].all()
     assert np.count_nonzero(~judged.keep[is_bleeding]) > 0.7 * is_bleeding.sum()
+
+
+def test_a_drawn_beam_outside_the_benchmark_draws() -> None:
+    """Draw 100 of the randomised bleeding models (the benchmark judges by 0-19 and holds out
+    20-39): a Mid-70 rosette on boxes, 0.08 x 0.03 deg beam, uniform mixing. The filter gets the
+    LiDAR model's range noise and scan pattern. Before the false-alarm tau, the well-supported
+    neighbour and the floor's margin the pooled F here was 0.59 (0.65 with the tau alone, 0.76
+    with the neighbour, 0.78 with the floor); now 0.81."""
+    from pipeline.synth.bleeding import draw_bleeding_case
+    from tests.pipeline.denoise.clouds import bleeding_stop_clouds
+
+    beams = list(bleeding_stop_clouds(draw_bleeding_case(100), (0,)))
+    keep = [
+        range_gap_keep(b.cloud.points, range_noise_m=b.range_noise_m, pattern=b.scan_pattern)[0]
+        for b in beams
+    ]
+    is_bleeding = np.concatenate([b.cloud.is_bleeding for b in beams])
+    assert f_score(np.concatenate(keep), is_bleeding) > 0.75
