@@ -137,15 +137,11 @@ def _quadric_normal_equations(
     matrix holds only the 15 moments `sum a^i b^j` (i + j <= 4), each summed once: a third of
     the work of forming every product of the (N, k, 6) design matrix."""
     aa, ab, bb = a * a, a * b, b * b
-    powers = {(0, 0): None, (1, 0): a, (0, 1): b, (2, 0): aa, (1, 1): ab, (0, 2): bb}
+    powers = {(0, 0): np.ones_like(a), (1, 0): a, (0, 1): b, (2, 0): aa, (1, 1): ab, (0, 2): bb}
     powers.update({(3, 0): aa * a, (2, 1): aa * b, (1, 2): a * bb, (0, 3): bb * b})
     powers.update({(4, 0): aa * aa, (3, 1): aa * ab, (2, 2): aa * bb, (1, 3): ab * bb})
     powers[(0, 4)] = bb * bb
-    k = a.shape[1]
-    moments = {
-        key: (np.full(len(a), float(k)) if value is None else value.sum(axis=1))
-        for key, value in powers.items()
-    }
+    moments = {key: value.sum(axis=1) for key, value in powers.items()}
     terms = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
     gram = np.empty((len(a), 6, 6))
     for row, (i1, j1) in enumerate(terms):
