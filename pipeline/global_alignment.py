@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -67,6 +68,13 @@ class GlobalAlignmentConfig(BaseModel):
         ge=1.0,
         description="a candidate replaces the current estimate only where it scores this many "
         "times as high",
+    )
+    choose: Literal["score", "refined"] = Field(
+        default="score",
+        description="score: the candidates that score min_gain times as high replace the "
+        "estimate before stage 4; refined: they become a second start instead, stage 4 runs "
+        "from both and keeps the solution with the smaller metric error (eq. 12): a planar "
+        "score on sampled points can prefer a wrong match that refinement shows for what it is",
     )
     seed: int = 0
 

@@ -12,8 +12,9 @@ from pipeline.stages.state import CalibrationState, Detail
 
 
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
-    """Move each non-reference `T_ref_lidar` to its best-scoring planar candidate; needs stage 3's
-    floor (without it the stage is skipped)."""
+    """Move each non-reference `T_ref_lidar` to its best-scoring planar candidate, or (`choose:
+    refined`) leave the candidate to stage 4 as a second start; needs stage 3's floor (without it
+    the stage is skipped)."""
     rough = state.floor_refinement
     if not config.global_alignment.enabled:
         return StageOutcome(state, {"enabled": False}, "skipped")
@@ -37,6 +38,11 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         )
         details[f"{frame}_adopted"] = move.adopted
     moved = [frame for frame, move in zip(frames, result.moves, strict=True) if move.adopted]
-    message = f"moved {', '.join(moved)}" if moved else "every LiDAR kept where stage 3 left it"
+    if not moved:
+        return StageOutcome(state, details, "every LiDAR kept where stage 3 left it")
+    if config.global_alignment.choose == "refined":
+        second = (result.T_G_ref, result.T_ref_lidar)
+        message = f"a second start for stage 4 with {', '.join(moved)} moved"
+        return StageOutcome(dataclasses.replace(state, second_start=second), details, message)
     new_state = dataclasses.replace(state, T_G_ref=result.T_G_ref, T_ref_lidar=result.T_ref_lidar)
-    return StageOutcome(new_state, details, message)
+    return StageOutcome(new_state, details, f"moved {', '.join(moved)}")

@@ -6,8 +6,12 @@ from __future__ import annotations
 import dataclasses
 from functools import partial
 
+import numpy as np
+from numpy.typing import NDArray
+
 from pipeline.config import PipelineConfig
-from pipeline.optimisation import optimise
+from pipeline.metric import metric_error
+from pipeline.optimisation import OptimisationResult, optimise
 from pipeline.stages.runner import IterationProgress, Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail
 
@@ -18,13 +22,58 @@ def _iteration_of(on_iteration: IterationProgress, max_iterations: int, iteratio
 
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
     """Refine `T_G_ref` and `T_ref_lidar` on the objects; `listeners.on_iteration` hears of
-    every iteration."""
+    every iteration. With a second start (global alignment's candidate) the optimisation runs
+    from both and keeps the solution whose non-reference points lie nearer the reference's map
+    (the metric error, eq. 12: distances capped, so surfaces the reference never saw weigh
+    alike in both)."""
+    result = _optimise_from(state, config, listeners, state.T_G_ref, state.T_ref_lidar)
+    details: dict[str, Detail] = {}
+    if state.second_start is not None:
+        other = _optimise_from(state, config, listeners, *state.second_start)
+        objects = state.objects_in_lidar()
+        first_error, second_error = (
+            metric_error(objects, x.T_G_ref, x.T_ref_lidar, config.metric).value
+            for x in (result, other)
+        )
+        details.update(
+            starts=2,
+            metric_error_m=first_error,
+            second_start_metric_error_m=second_error,
+            second_start_kept=bool(second_error < first_error),
+        )
+        if second_error < first_error:
+            result = other
+    details.update(
+        iterations=result.iterations,
+        converged=result.converged,
+        residual=config.optimisation.residual,
+        residual_rms_m=result.residual_rms_m,
+    )
+    new_state = dataclasses.replace(
+        state, optimised=result, T_G_ref=result.T_G_ref, T_ref_lidar=result.T_ref_lidar
+    )
+    message = (
+        f"{result.iterations} iterations, {'converged' if result.converged else 'NOT converged'}"
+    )
+    if details.get("second_start_kept"):
+        message += " (from global alignment's candidate, nearer the reference's map)"
+    return StageOutcome(new_state, details, message)
+
+
+def _optimise_from(
+    state: CalibrationState,
+    config: PipelineConfig,
+    listeners: Listeners,
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+) -> OptimisationResult:
+    """Stage 4 from the start (`T_G_ref`, `T_ref_lidar`)."""
     rough = state.floor_refinement
     on_iteration = listeners.on_iteration
-    result = optimise(
+    return optimise(
         state.objects_in_lidar(),
-        state.T_G_ref,
-        state.T_ref_lidar,
+        T_G_ref,
+        T_ref_lidar,
         config.optimisation,
         planes=state.floors_seen() if rough is not None else None,
         floor_G=rough.floor_G if rough is not None else None,
@@ -34,16 +83,3 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         else partial(_iteration_of, on_iteration, config.optimisation.max_iterations),
         range_bias=config.observability.range_bias == "estimated",
     )
-    details: dict[str, Detail] = {
-        "iterations": result.iterations,
-        "converged": result.converged,
-        "residual": config.optimisation.residual,
-        "residual_rms_m": result.residual_rms_m,
-    }
-    new_state = dataclasses.replace(
-        state, optimised=result, T_G_ref=result.T_G_ref, T_ref_lidar=result.T_ref_lidar
-    )
-    message = (
-        f"{result.iterations} iterations, {'converged' if result.converged else 'NOT converged'}"
-    )
-    return StageOutcome(new_state, details, message)

@@ -92,7 +92,9 @@ class CalibrationState:
     where they started. Stage 1 leaves `floors_in_lidar` (fitted before it: it judges what stands
     on them), its keep masks `kept` (None per cloud: all kept) and `floor_seconds` (the floors'
     time, which segmentation reports); `filtered(lidar, stop)` gives a cloud as stage 2 sees it.
-    `floor_refinement` is None when stage 3 is disabled."""
+    `floor_refinement` is None when stage 3 is disabled. `second_start` (`T_G_ref`,
+    `T_ref_lidar`): another start for stage 4 (global alignment's candidate when it is to be
+    judged after refinement), None when there is none."""
 
     lidars: tuple[LidarInfo, ...]
     clouds_in_lidar: PerCloud[Points]
@@ -108,6 +110,7 @@ class CalibrationState:
     floor_seconds: float = 0.0
     segments: PerCloud[Segmentation] | None = None
     floor_refinement: RoughRefinementResult | None = None
+    second_start: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     optimised: OptimisationResult | None = None
     metric_initial: MetricError | None = None
     metric_final: MetricError | None = None

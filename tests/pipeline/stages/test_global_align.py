@@ -34,13 +34,9 @@ def test_off_by_default_and_then_the_state_is_untouched() -> None:
     assert outcome.details == {"enabled": False}
 
 
-def test_enabled_it_reports_each_lidar_and_brings_a_far_one_near() -> None:
-    state = _after_stage_3()
-    _, truth = box_problem()
-    frames = tuple(lidar.frame for lidar in state.lidars)
-    T_true = true_T_ref_lidar(truth, frames)
-    # Stage 3 leaves the rear LiDAR near; push it 0.4 m and 8 deg off along the floor (about
-    # the floor normal seen from the reference).
+def _pushed_far(state: CalibrationState) -> CalibrationState:
+    """`state` with the rear LiDAR 0.4 m and 8 deg off along the floor (about the floor normal
+    seen from the reference); stage 3 left it near."""
     rough = state.floor_refinement
     assert rough is not None
     up = state.T_G_ref[0, :3, :3].T @ rough.floor_G.normal
@@ -49,7 +45,16 @@ def test_enabled_it_reports_each_lidar_and_brings_a_far_one_near() -> None:
     push[:3, 3] = 0.4 * tangent_basis(up)[:, 0]
     far = state.T_ref_lidar.copy()
     far[1] = push @ far[1]
-    state = dataclasses.replace(state, T_ref_lidar=far)
+    return dataclasses.replace(state, T_ref_lidar=far)
+
+
+def test_enabled_it_reports_each_lidar_and_brings_a_far_one_near() -> None:
+    state = _after_stage_3()
+    _, truth = box_problem()
+    frames = tuple(lidar.frame for lidar in state.lidars)
+    T_true = true_T_ref_lidar(truth, frames)
+    state = _pushed_far(state)
+    far = state.T_ref_lidar
     config = PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True))
     outcome = global_align.run(state, config, Listeners())
     assert outcome.details[f"{frames[1]}_adopted"] is True
@@ -58,3 +63,25 @@ def test_enabled_it_reports_each_lidar_and_brings_a_far_one_near() -> None:
     after = pose_difference(outcome.state.T_ref_lidar[1], T_true[1])
     assert before[0] > 0.3 and after[0] < 0.1 and after[1] < 2.0
     np.testing.assert_allclose(outcome.state.T_G_ref, state.T_G_ref)
+
+
+def test_refined_it_leaves_the_candidate_to_stage_4_as_a_second_start() -> None:
+    state = _pushed_far(_after_stage_3())
+    config = PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True, choose="refined"))
+    outcome = global_align.run(state, config, Listeners())
+    frames = tuple(lidar.frame for lidar in state.lidars)
+    assert outcome.details[f"{frames[1]}_adopted"] is True
+    # The estimate stays where stage 3 left it; the candidate waits as the second start.
+    np.testing.assert_array_equal(outcome.state.T_ref_lidar, state.T_ref_lidar)
+    assert outcome.state.second_start is not None
+    scored = global_align.run(
+        state, PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True)), Listeners()
+    )
+    np.testing.assert_allclose(outcome.state.second_start[1], scored.state.T_ref_lidar)
+
+
+def test_without_a_candidate_there_is_no_second_start() -> None:
+    state = _after_stage_3()
+    config = PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True, choose="refined"))
+    outcome = global_align.run(state, config, Listeners())
+    assert outcome.state.second_start is None

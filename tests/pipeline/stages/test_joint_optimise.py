@@ -1,0 +1,42 @@
+import dataclasses
+
+import numpy as np
+
+from pipeline.config import PipelineConfig
+from pipeline.stages import joint_optimise
+from pipeline.stages.runner import Listeners
+from pipeline.transforms import pose_difference
+from tests.pipeline.calibration_data import box_problem, true_T_ref_lidar
+from tests.pipeline.stages.test_global_align import _after_stage_3, _pushed_far
+
+
+def test_one_start_reports_no_second() -> None:
+    outcome = joint_optimise.run(_after_stage_3(), PipelineConfig(), Listeners())
+    assert "starts" not in outcome.details
+    assert outcome.state.optimised is not None
+
+
+def test_of_two_starts_the_solution_nearer_the_reference_map_is_kept_whichever_comes_first() -> (
+    None
+):
+    near = _after_stage_3()
+    far = _pushed_far(near)
+    _, truth = box_problem()
+    T_true = true_T_ref_lidar(truth, tuple(lidar.frame for lidar in near.lidars))
+    config = PipelineConfig()
+    for state, second_kept in (
+        (dataclasses.replace(near, second_start=(far.T_G_ref, far.T_ref_lidar)), False),
+        (dataclasses.replace(far, second_start=(near.T_G_ref, near.T_ref_lidar)), True),
+    ):
+        outcome = joint_optimise.run(state, config, Listeners())
+        details = outcome.details
+        assert details["starts"] == 2
+        assert details["second_start_kept"] is second_kept
+        kept, other = details["metric_error_m"], details["second_start_metric_error_m"]
+        assert isinstance(kept, float) and isinstance(other, float)
+        assert (other < kept) is second_kept
+        translation, _ = pose_difference(outcome.state.T_ref_lidar[1], T_true[1])
+        assert translation < 0.01
+        optimised = outcome.state.optimised
+        assert optimised is not None
+        np.testing.assert_array_equal(outcome.state.T_ref_lidar, optimised.T_ref_lidar)
