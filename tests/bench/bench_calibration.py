@@ -143,6 +143,7 @@ CONFIG_METHODS = (
     "kernel_30mm",
     "kernel_sigmas",
     "surface_debias",
+    "global_refined",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -172,6 +173,9 @@ def method_config(method: str) -> PipelineConfig:
         data["optimisation"]["kernel_scale_min_m"] = 0.03
     elif method == "kernel_sigmas":
         data["optimisation"]["kernel_scale_min_sigmas"] = 3.8
+    elif method == "global_refined":
+        data["global_alignment"]["enabled"] = True
+        data["global_alignment"]["choose"] = "refined"
     elif method == "surface_debias":
         data["segmentation"]["surface_debias"] = "bootstrap"
     elif method == "fine_cauchy":
