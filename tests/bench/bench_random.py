@@ -87,6 +87,10 @@ class SeedResult:
     seconds: float = 0.0
     world: str = ""
     """The world the recording was made in (`WORLDS`); "" for a run without `--worlds`."""
+    metric_error_m: float | None = None
+    """Eq. 12 after calibration (what the verdict's `metric_error` check judged)."""
+    failed_checks: list[str] = field(default_factory=list)
+    """The names of the verdict's failed checks (why a failed verdict failed)."""
 
     @property
     def max_translation(self) -> float:
@@ -162,9 +166,10 @@ def run_seed(
     seed: int,
     methods: Sequence[str],
     world: str | None = None,
+    discard_recording: bool = False,
 ) -> list[SeedResult]:
     """Synthesise (once) and calibrate one seed (in `world`) with each method not already
-    cached."""
+    cached; with `discard_recording`, delete the recording once every method has its result."""
     from pipeline.calibrate import calibrate
     from pipeline.errors import PipelineError
     from pipeline.io import read_recording
@@ -197,12 +202,16 @@ def run_seed(
             record.translation, record.rotation = t, r
             record.sigma_translation, record.sigma_rotation = sigma_t, sigma_r
             record.passed = bool(result.passed)
+            record.metric_error_m = result.metric_error_final
+            record.failed_checks = [check.name for check in result.verdict.failed]
         record.seconds = time.perf_counter() - started
         path.parent.mkdir(parents=True, exist_ok=True)
         partial = path.with_suffix(".partial")
         partial.write_text(json.dumps(asdict(record)))
         partial.replace(path)  # atomic: a killed run leaves no half-written result
         results.append(record)
+    if discard_recording and directory.exists():
+        shutil.rmtree(directory)
     return results
 
 
@@ -443,6 +452,12 @@ def main(argv: Sequence[str] | None = None) -> None:
         help="run each seed in these worlds, e.g. open,room,people,uneven-floor,dust,factory "
         "(random: the seed draws one); left out: the open floor, as before worlds existed",
     )
+    parser.add_argument(
+        "--discard-recordings",
+        action="store_true",
+        help="delete each seed's recording once all its methods have results (a full-rate "
+        "recording takes about 0.4 GB; the results stay cached, a later method synthesises again)",
+    )
     args = parser.parse_args(argv)
     seeds = parse_seeds(args.seeds)
     worlds = parse_worlds(args.worlds)
@@ -459,7 +474,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = {
-            pool.submit(run_seed, args.cache, args.rate_scale, seed, args.methods, world): seed
+            pool.submit(
+                run_seed,
+                args.cache,
+                args.rate_scale,
+                seed,
+                args.methods,
+                world,
+                args.discard_recordings,
+            ): seed
             for seed in seeds
             for world in worlds
         }

@@ -109,6 +109,18 @@ def test_cached_results_are_read_back_not_recomputed(tmp_path: Path) -> None:
     assert not (tmp_path / "recordings").exists()
 
 
+def test_a_discarded_recording_goes_once_every_method_has_its_result(tmp_path: Path) -> None:
+    record = _record(42, 3.0, 0.05, True)
+    path = result_path(tmp_path, 0.1, "proposed", 42)
+    path.parent.mkdir(parents=True)
+    path.write_text(__import__("json").dumps(record.__dict__))
+    recording = recording_dir(tmp_path, 0.1, 42)
+    recording.mkdir(parents=True)
+    (recording / "left-from-an-earlier-run").write_text("x")
+    assert run_seed(tmp_path, 0.1, 42, ["proposed"], discard_recording=True) == [record]
+    assert not recording.exists()
+
+
 def _in_world(seed: int, world: str, mm: float, deg: float, **kw: object) -> SeedResult:
     return _record(
         seed, mm, deg, True, world=world, scenario_class=f"loop/mixed/small/{world}", **kw
