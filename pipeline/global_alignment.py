@@ -47,7 +47,11 @@ class GlobalAlignmentConfig(BaseModel):
 
     model_config = _FROZEN
 
-    enabled: bool = False
+    enabled: bool = Field(
+        default=True,
+        description="the planar search runs between stages 3 and 4 (on since `choose: refined` "
+        "became the default: see docs/method.md for the randomised benchmark behind it)",
+    )
     max_translation_m: float = Field(
         default=1.0,
         gt=0,
@@ -70,7 +74,7 @@ class GlobalAlignmentConfig(BaseModel):
         "times as high",
     )
     choose: Literal["score", "refined"] = Field(
-        default="score",
+        default="refined",
         description="score: the candidates that score min_gain times as high replace the "
         "estimate before stage 4; refined: they become a second start instead, stage 4 runs "
         "from both and keeps the solution with the smaller metric error (eq. 12): a planar "

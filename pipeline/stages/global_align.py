@@ -1,5 +1,5 @@
-"""Between stages 3 and 4, opt-in: the planar search over each LiDAR's rotation about the floor
-normal and shift along the floor (`pipeline.global_alignment`); skipped unless enabled."""
+"""Between stages 3 and 4: the planar search over each LiDAR's rotation about the floor normal and
+shift along the floor (`pipeline.global_alignment`); skipped where the config disables it."""
 
 from __future__ import annotations
 

@@ -16,8 +16,10 @@ from pipeline.stages.runner import IterationProgress, Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail
 
 
-def _iteration_of(on_iteration: IterationProgress, max_iterations: int, iteration: int) -> None:
-    on_iteration(iteration, max_iterations)
+def _iteration_of(
+    on_iteration: IterationProgress, done_before: int, max_iterations: int, iteration: int
+) -> None:
+    on_iteration(done_before + iteration, max_iterations)
 
 
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
@@ -25,11 +27,14 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     every iteration. With a second start (global alignment's candidate) the optimisation runs
     from both and keeps the solution whose non-reference points lie nearer the reference's map
     (the metric error, eq. 12: distances capped, so surfaces the reference never saw weigh
-    alike in both)."""
-    result = _optimise_from(state, config, listeners, state.T_G_ref, state.T_ref_lidar)
+    alike in both). Iterations are counted on over the two runs, so progress never goes back."""
+    starts = 1 if state.second_start is None else 2
+    result = _optimise_from(state, config, listeners, (state.T_G_ref, state.T_ref_lidar), starts)
     details: dict[str, Detail] = {}
     if state.second_start is not None:
-        other = _optimise_from(state, config, listeners, *state.second_start)
+        other = _optimise_from(
+            state, config, listeners, state.second_start, starts, done_before=result.iterations
+        )
         objects = state.objects_in_lidar()
         first_error, second_error = (
             metric_error(objects, x.T_G_ref, x.T_ref_lidar, config.metric).value
@@ -40,6 +45,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
             metric_error_m=first_error,
             second_start_metric_error_m=second_error,
             second_start_kept=bool(second_error < first_error),
+            iterations_all_starts=result.iterations + other.iterations,
         )
         if second_error < first_error:
             result = other
@@ -64,12 +70,16 @@ def _optimise_from(
     state: CalibrationState,
     config: PipelineConfig,
     listeners: Listeners,
-    T_G_ref: NDArray[np.float64],
-    T_ref_lidar: NDArray[np.float64],
+    start: tuple[NDArray[np.float64], NDArray[np.float64]],
+    starts: int,
+    done_before: int = 0,
 ) -> OptimisationResult:
-    """Stage 4 from the start (`T_G_ref`, `T_ref_lidar`)."""
+    """Stage 4 from `start` (`T_G_ref`, `T_ref_lidar`), one of `starts` runs; its iterations are
+    reported after the `done_before` of the runs before it, out of `starts` times the limit."""
     rough = state.floor_refinement
     on_iteration = listeners.on_iteration
+    T_G_ref, T_ref_lidar = start
+    max_iterations = starts * config.optimisation.max_iterations
     return optimise(
         state.objects_in_lidar(),
         T_G_ref,
@@ -80,6 +90,6 @@ def _optimise_from(
         normals=state.object_normals_in_lidar(),
         on_iteration=None
         if on_iteration is None
-        else partial(_iteration_of, on_iteration, config.optimisation.max_iterations),
+        else partial(_iteration_of, on_iteration, done_before, max_iterations),
         range_bias=config.observability.range_bias == "estimated",
     )

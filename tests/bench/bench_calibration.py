@@ -144,6 +144,7 @@ CONFIG_METHODS = (
     "kernel_sigmas",
     "surface_debias",
     "global_refined",
+    "without_global_alignment",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -169,6 +170,9 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_neighbours"] = 30
     elif method == "global_alignment":
         data["global_alignment"]["enabled"] = True
+        data["global_alignment"]["choose"] = "score"
+    elif method == "without_global_alignment":
+        data["global_alignment"]["enabled"] = False
     elif method == "kernel_30mm":
         data["optimisation"]["kernel_scale_min_m"] = 0.03
     elif method == "kernel_sigmas":

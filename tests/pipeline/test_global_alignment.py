@@ -5,7 +5,7 @@ from pipeline.geometry import Plane
 from pipeline.global_alignment import GlobalAlignmentConfig, align_globally
 from pipeline.transforms import Points, apply, from_xyz_rpy, invert, pose_difference
 
-CONFIG = GlobalAlignmentConfig(enabled=True)
+CONFIG = GlobalAlignmentConfig()
 
 
 def _scene(rng: np.random.Generator) -> Points:

@@ -27,9 +27,10 @@ def _after_stage_3() -> CalibrationState:
     )
 
 
-def test_off_by_default_and_then_the_state_is_untouched() -> None:
+def test_disabled_the_state_is_untouched() -> None:
     state = _after_stage_3()
-    outcome = global_align.run(state, PipelineConfig(), Listeners())
+    config = PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=False))
+    outcome = global_align.run(state, config, Listeners())
     assert outcome.state is state
     assert outcome.details == {"enabled": False}
 
@@ -55,7 +56,7 @@ def test_enabled_it_reports_each_lidar_and_brings_a_far_one_near() -> None:
     T_true = true_T_ref_lidar(truth, frames)
     state = _pushed_far(state)
     far = state.T_ref_lidar
-    config = PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True))
+    config = PipelineConfig(global_alignment=GlobalAlignmentConfig(choose="score"))
     outcome = global_align.run(state, config, Listeners())
     assert outcome.details[f"{frames[1]}_adopted"] is True
     assert set(outcome.details) >= {f"{frames[1]}_rotation_deg", f"{frames[1]}_score_gain"}
@@ -67,7 +68,7 @@ def test_enabled_it_reports_each_lidar_and_brings_a_far_one_near() -> None:
 
 def test_refined_it_leaves_the_candidate_to_stage_4_as_a_second_start() -> None:
     state = _pushed_far(_after_stage_3())
-    config = PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True, choose="refined"))
+    config = PipelineConfig(global_alignment=GlobalAlignmentConfig())
     outcome = global_align.run(state, config, Listeners())
     frames = tuple(lidar.frame for lidar in state.lidars)
     assert outcome.details[f"{frames[1]}_adopted"] is True
@@ -75,13 +76,13 @@ def test_refined_it_leaves_the_candidate_to_stage_4_as_a_second_start() -> None:
     np.testing.assert_array_equal(outcome.state.T_ref_lidar, state.T_ref_lidar)
     assert outcome.state.second_start is not None
     scored = global_align.run(
-        state, PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True)), Listeners()
+        state, PipelineConfig(global_alignment=GlobalAlignmentConfig(choose="score")), Listeners()
     )
     np.testing.assert_allclose(outcome.state.second_start[1], scored.state.T_ref_lidar)
 
 
 def test_without_a_candidate_there_is_no_second_start() -> None:
     state = _after_stage_3()
-    config = PipelineConfig(global_alignment=GlobalAlignmentConfig(enabled=True, choose="refined"))
+    config = PipelineConfig(global_alignment=GlobalAlignmentConfig())
     outcome = global_align.run(state, config, Listeners())
     assert outcome.state.second_start is None

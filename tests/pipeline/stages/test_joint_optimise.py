@@ -40,3 +40,16 @@ def test_of_two_starts_the_solution_nearer_the_reference_map_is_kept_whichever_c
         optimised = outcome.state.optimised
         assert optimised is not None
         np.testing.assert_array_equal(outcome.state.T_ref_lidar, optimised.T_ref_lidar)
+
+
+def test_with_two_starts_iterations_are_counted_on_so_progress_never_goes_back() -> None:
+    near = _after_stage_3()
+    far = _pushed_far(near)
+    heard: list[tuple[int, int]] = []
+    listeners = Listeners(on_iteration=lambda done, limit: heard.append((done, limit)))
+    state = dataclasses.replace(near, second_start=(far.T_G_ref, far.T_ref_lidar))
+    outcome = joint_optimise.run(state, PipelineConfig(), listeners)
+    done = [d for d, _ in heard]
+    assert done == list(range(1, len(done) + 1))
+    assert len(done) == outcome.details["iterations_all_starts"]
+    assert {limit for _, limit in heard} == {2 * PipelineConfig().optimisation.max_iterations}
