@@ -1,15 +1,27 @@
 """How close `fleetcal calibrate` runs to the floor: reading the recording (issue 17).
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -m tests.bench.bench_speed [--scenario set1-box ...]
+        [--random-seeds 1000 1001 1002 1003] [--scaling]
 
-For each full-rate scenario (synthesised once, cached under `--cache`), each in a fresh process:
+For each full-rate scenario (synthesised once, cached under `--cache`), and each random scenario
+of `--random-seeds` (`fleetcal synth random`; by default the first seed of each routine class:
+1000 rotate, 1001 lane, 1002 figure-eight, 1003 loop), each in a fresh process:
 (a) the floor: read and deserialise every message with rosbags and nothing else; (b) `fleetcal
-calibrate` as a user runs it, with the seconds of each stage from its result.json; (r) the report
-images (`pipeline.report.render_report`) of that calibration, timed alone, with matplotlib already
-imported as in the service's pool children (`load_renderer`, preloaded by their fork server; its
-own seconds are in the row's detail). CPU seconds (user +
-system, what a loaded machine cannot blur), wall seconds and peak RSS come from the child's
-rusage; the ratios are of CPU seconds, all measured in this one run. The load average is printed.
+calibrate` as a user runs it, with the seconds of each stage from its result.json; (c) the
+service's worker job on the same file (`workers.job.calibrate_run`: the upload fetched from
+local storage, read, calibrated, result document and report images stored), with matplotlib
+imported first as in the service's pool children, and its CPU counted from the job's start (a
+pool child has imported the pipeline before it takes a job); the queue's hand-off and the
+database commit around it are not in it; (r) the report images (`pipeline.report.render_report`) of that
+calibration, timed alone, likewise (its import's seconds are in the row's detail). CPU seconds
+(user + system, what a loaded machine cannot blur), wall seconds and peak RSS come from the
+child's rusage; the ratios are of CPU seconds, all measured in this one run. The load average is
+printed.
+
+`--scaling` prints instead how `fleetcal calibrate` grows with the work: set 1 with boxes at
+0.25, 0.5, 1, 2 and 4 times the point rate (about 25-400 MB; two LiDARs, 16 stops) and random
+scenarios of 2-5 LiDARs and 6-28 stops (`--scaling-seeds`), each row with its points and CPU
+seconds per million points read.
 """
 
 from __future__ import annotations
@@ -21,14 +33,21 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import shutil  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 DEFAULT_SCENARIOS = ("set1-box", "set2-box")
+DEFAULT_RANDOM_SEEDS = (1000, 1001, 1002, 1003)
+"""The first seed of each routine class: rotate, lane, figure-eight, loop."""
+SCALING_RATES = (0.25, 0.5, 1.0, 2.0, 4.0)
+DEFAULT_SCALING_SEEDS = (1001, 1003, 1005, 1000, 1011)
+"""Random scenarios of 2, 2, 3, 4 and 5 LiDARs and 6 to 28 stops (the table gives each)."""
 DEFAULT_CACHE = Path(tempfile.gettempdir()) / "fleetcal-bench-speed"
 
 # (a): every message read and deserialised, as `pipeline.io` must at the least.
@@ -36,12 +55,50 @@ _RAW_READ = """
 import sys
 from pathlib import Path
 from rosbags.highlevel import AnyReader
-messages = 0
+messages = points = 0
 with AnyReader([Path(sys.argv[1])]) as reader:
     for connection, _, raw in reader.messages():
-        reader.deserialize(raw, connection.msgtype)
+        message = reader.deserialize(raw, connection.msgtype)
         messages += 1
-print(messages)
+        if connection.msgtype == "sensor_msgs/msg/PointCloud2":
+            points += message.width * message.height
+print(messages, points)
+"""
+
+# (c): the service's worker job on the recording's file, uploaded to local storage first.
+_SERVICE_RUN = """
+import json, sys, time, uuid
+from pathlib import Path
+from pipeline.io.formats import detect_format_from_head
+from pipeline.report import load_renderer
+from service.settings import Settings
+from service.storage import make_storage
+from workers import job
+from workers.context import JobSpec
+source, scratch = Path(sys.argv[1]), Path(sys.argv[2])
+settings = Settings(data_dir=scratch, storage_url=(scratch / "storage").as_uri())
+key = f"recordings/bench/{uuid.uuid4()}"
+pending = make_storage(settings).begin_upload(key)
+with source.open("rb") as file:
+    head = file.read(4096)
+    pending.write(head)
+    while chunk := file.read(1 << 20):
+        pending.write(chunk)
+pending.commit()
+detected = detect_format_from_head(head)
+spec = JobSpec(
+    run_id=str(uuid.uuid4()), attempt=1, robot_id="bench", kind="end_of_line",
+    storage_key=key, upload_format=detected.value, config=None, settings=settings,
+)
+load_renderer()
+wall, cpu = time.perf_counter(), time.process_time()
+document = job.calibrate_run(spec, lambda name, progress: None)
+print(json.dumps({
+    "wall_s": time.perf_counter() - wall,
+    "cpu_s": time.process_time() - cpu,
+    "report_s": document["stages"]["report"]["seconds"],
+    "images": len(document["report"].get("images", [])),
+}))
 """
 
 # (r): the report images of a calibration, timed alone (the read and calibration before it not).
@@ -94,20 +151,57 @@ def measured(args: list[str], ok: tuple[int, ...] = (0,)) -> Measured:
     return Measured(usage.ru_utime + usage.ru_stime, wall, usage.ru_maxrss / 1024, stdout)
 
 
-def recording(scenario: str, cache: Path, seed: int) -> Path:
-    """The full-rate recording of `scenario`, synthesised into `cache` on first use."""
+def recording(scenario: str, cache: Path, seed: int, rate_scale: float = 1.0) -> Path:
+    """The recording of `scenario` (a named one, or `random-N`: `fleetcal synth random --seed
+    N`) at `rate_scale` of the point rate, synthesised into `cache` on first use."""
+    from pipeline.synth.random_scenario import random_scenario
     from pipeline.synth.recording import RECORDING_DIR, write_recording
 
-    done = cache / f"{scenario}-seed{seed}"
+    name = f"{scenario}-seed{seed}" + ("" if rate_scale == 1.0 else f"-rate{rate_scale:g}")
+    done = cache / name
     if not done.is_dir():
-        partial = cache / f"{scenario}-seed{seed}.partial"
+        partial = cache / f"{name}.partial"
         if partial.exists():
-            raise SystemExit(f"{partial} is left from an interrupted run: delete it and rerun")
+            shutil.rmtree(partial)  # left by an interrupted run: synthesise it again
         started = time.perf_counter()
-        write_recording(scenario, partial, seed=seed)
+        spec = random_scenario(int(scenario.split("-")[1])) if _is_random(scenario) else scenario
+        write_recording(spec, partial, seed=seed, rate_scale=rate_scale)
         partial.rename(done)
-        print(f"synthesised {scenario} in {time.perf_counter() - started:.0f} s", file=sys.stderr)
+        print(f"synthesised {name} in {time.perf_counter() - started:.0f} s", file=sys.stderr)
     return done / RECORDING_DIR
+
+
+def _is_random(scenario: str) -> bool:
+    return scenario.startswith("random-")
+
+
+def _random_seed_of(scenario: str, seed: int) -> int:
+    """The synthesiser's seed: a random scenario's own seed, as `fleetcal synth random` uses."""
+    return int(scenario.split("-")[1]) if _is_random(scenario) else seed
+
+
+def describe_scenario(scenario: str) -> str:
+    """`random-1000 (rotate/spinning/large)` for a random scenario, else the name."""
+    if not _is_random(scenario):
+        return scenario
+    from pipeline.synth.random_scenario import random_scenario
+
+    return f"{scenario} ({random_scenario(int(scenario.split('-')[1])).scenario_class})"
+
+
+def _stops(motion: Any) -> int:
+    """Stops of a scenario's motion: an arc's `stops`, a route's dwell times."""
+    return int(motion.stops) if hasattr(motion, "stops") else len(motion.dwell_s)
+
+
+def _upload_file(path: Path) -> Path:
+    """The file a robot would upload for the recording at `path` (a bag directory's MCAP)."""
+    if path.is_file():
+        return path
+    files = sorted(path.glob("*.mcap"))
+    if len(files) != 1:
+        raise SystemExit(f"{path}: expected one .mcap file to upload, found {len(files)}")
+    return files[0]
 
 
 def _size_mb(path: Path) -> float:
@@ -115,16 +209,21 @@ def _size_mb(path: Path) -> float:
     return sum(f.stat().st_size for f in files) / 1e6
 
 
-def bench(path: Path) -> list[tuple[str, Measured, str]]:
-    """Rows (what, measurement, detail) for one recording."""
-    python = sys.executable
-    raw = measured([python, "-c", _RAW_READ, str(path)])
+def raw_read(path: Path) -> tuple[Measured, int, int]:
+    """(a), and the recording's messages and LiDAR points."""
+    raw = measured([sys.executable, "-c", _RAW_READ, str(path)])
+    messages, points = (int(x) for x in raw.stdout.split())
+    return raw, messages, points
+
+
+def calibrate_cli(path: Path) -> tuple[Measured, dict[str, Any]]:
+    """(b), and its result.json's stages."""
     with tempfile.TemporaryDirectory(prefix="bench-speed-") as scratch:
         out = Path(scratch) / "result.json"
         # Exit 1 is a failed verdict, still a whole run.
         cli = measured(
             [
-                python,
+                sys.executable,
                 "-c",
                 "from workers.cli import main; main()",
                 "calibrate",
@@ -134,13 +233,30 @@ def bench(path: Path) -> list[tuple[str, Measured, str]]:
             ],
             ok=(0, 1),
         )
-        stages = json.loads(out.read_text())["stages"]
+        stages: dict[str, Any] = json.loads(out.read_text())["stages"]
+    return cli, stages
+
+
+def bench(path: Path) -> list[tuple[str, Measured, str]]:
+    """Rows (what, measurement, detail) for one recording."""
+    python = sys.executable
+    raw, messages, points = raw_read(path)
+    cli, stages = calibrate_cli(path)
+    with tempfile.TemporaryDirectory(prefix="bench-speed-service-") as scratch:
+        service = measured([python, "-c", _SERVICE_RUN, str(_upload_file(path)), scratch])
+    job = json.loads(service.stdout.strip().splitlines()[-1])
     report = measured([python, "-c", _REPORT, str(path)])
     drawn = json.loads(report.stdout.strip().splitlines()[-1])
     per_stage = ", ".join(f"{name} {stage['seconds']:.2f}" for name, stage in stages.items())
     return [
-        ("(a) raw read (rosbags)", raw, f"{raw.stdout.strip()} messages"),
+        ("(a) raw read (rosbags)", raw, f"{messages} messages, {points / 1e6:.1f} M points"),
         ("(b) fleetcal calibrate", cli, f"stages (wall s): {per_stage}"),
+        (
+            "(c) the service's worker job",
+            Measured(job["cpu_s"], job["wall_s"], service.peak_mib, ""),
+            f"download, read, calibrate, {job['images']} report images stored "
+            f"({job['report_s']:.2f} s); matplotlib imported before, as in the pool",
+        ),
         (
             "(r) report images",
             Measured(drawn["cpu_s"], drawn["wall_s"], report.peak_mib, ""),
@@ -150,17 +266,59 @@ def bench(path: Path) -> list[tuple[str, Measured, str]]:
     ]
 
 
+def scaling_table(cache: Path, seed: int, random_seeds: list[int]) -> None:
+    """`--scaling`: (a) and (b) per recording, with its size, LiDARs, stops and points."""
+    from pipeline.synth.random_scenario import random_scenario
+    from pipeline.synth.scenarios import get_scenario
+
+    cases = [("set1-box", seed, rate) for rate in SCALING_RATES]
+    cases += [(f"random-{n}", n, 1.0) for n in random_seeds]
+    print(
+        "| recording | rate | MB | LiDARs | stops | M points | (a) CPU s | (b) CPU s | (b) / (a) "
+        "| (b) CPU s per M points | (b) peak RSS MiB |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for scenario, synth_seed, rate in cases:
+        path = recording(scenario, cache, synth_seed, rate)
+        spec = random_scenario(synth_seed) if _is_random(scenario) else get_scenario(scenario)
+        raw, _, points = raw_read(path)
+        cli, _ = calibrate_cli(path)
+        print(
+            f"| {describe_scenario(scenario)} | {rate:g} | {_size_mb(path):.0f} "
+            f"| {len(spec.lidars)} | {_stops(spec.motion)} | {points / 1e6:.1f} | {raw.cpu_s:.2f} "
+            f"| {cli.cpu_s:.2f} | {cli.cpu_s / raw.cpu_s:.1f}x | {cli.cpu_s / (points / 1e6):.3f} "
+            f"| {cli.peak_mib:.0f} |",
+            flush=True,
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", nargs="+", default=list(DEFAULT_SCENARIOS))
+    parser.add_argument("--scenario", nargs="*", default=list(DEFAULT_SCENARIOS))
+    parser.add_argument(
+        "--random-seeds",
+        nargs="*",
+        type=int,
+        default=list(DEFAULT_RANDOM_SEEDS),
+        help="random scenarios (`fleetcal synth random --seed N`) to time as well",
+    )
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--scaling", action="store_true", help="the table of cost against size")
+    parser.add_argument("--scaling-seeds", nargs="*", type=int, default=list(DEFAULT_SCALING_SEEDS))
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
-
-    paths = {scenario: recording(scenario, args.cache, args.seed) for scenario in args.scenario}
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
     print(f"{os.cpu_count()} cores, load average {load} (1 / 5 / 15 min) before the runs\n")
+    if args.scaling:
+        scaling_table(args.cache, args.seed, args.scaling_seeds)
+        return
+
+    scenarios = [*args.scenario, *(f"random-{n}" for n in args.random_seeds)]
+    paths = {
+        scenario: recording(scenario, args.cache, _random_seed_of(scenario, args.seed))
+        for scenario in scenarios
+    }
     print("| scenario | MB | what | CPU s | wall s | peak RSS MiB | CPU / (a) | detail |")
     print("|---|---:|---|---:|---:|---:|---:|---|")
     for scenario, path in paths.items():
@@ -168,8 +326,8 @@ def main() -> None:
         floor = rows[0][1].cpu_s
         for what, m, detail in rows:
             print(
-                f"| {scenario} | {_size_mb(path):.0f} | {what} | {m.cpu_s:.2f} | {m.wall_s:.2f} "
-                f"| {m.peak_mib:.0f} | {m.cpu_s / floor:.1f}x | {detail} |",
+                f"| {describe_scenario(scenario)} | {_size_mb(path):.0f} | {what} | {m.cpu_s:.2f} "
+                f"| {m.wall_s:.2f} | {m.peak_mib:.0f} | {m.cpu_s / floor:.1f}x | {detail} |",
                 flush=True,
             )
 
