@@ -12,11 +12,11 @@ service's worker job on the same file (`workers.job.calibrate_run`: the upload f
 local storage, read, calibrated, result document and report images stored), with matplotlib
 imported first as in the service's pool children, and its CPU counted from the job's start (a
 pool child has imported the pipeline before it takes a job); the queue's hand-off and the
-database commit around it are not in it; (r) the report images (`pipeline.report.render_report`) of that
-calibration, timed alone, likewise (its import's seconds are in the row's detail). CPU seconds
-(user + system, what a loaded machine cannot blur), wall seconds and peak RSS come from the
-child's rusage; the ratios are of CPU seconds, all measured in this one run. The load average is
-printed.
+database commit around it are not in it; (r) the report images
+(`pipeline.report.render_report`) of that calibration, timed alone, likewise (its import's
+seconds are in the row's detail). CPU seconds (user + system, what a loaded machine cannot blur)
+and wall seconds come from the child's rusage, its peak RSS from its own VmHWM at exit; the
+ratios are of CPU seconds, all measured in this one run. The load average is printed.
 
 `--scaling` prints instead how `fleetcal calibrate` grows with the work: set 1 with boxes at
 0.25, 0.5, 1, 2 and 4 times the point rate (about 25-400 MB; two LiDARs, 16 stops) and random
@@ -136,8 +136,35 @@ class Measured:
     stdout: str
 
 
+# Prepended to every child's `-c` script: at exit it prints its peak RSS (VmHWM, of its own
+# memory since exec). The rusage `ru_maxrss` is no use for this: Linux carries the parent's
+# high-water mark over the child's exec, so a parent that synthesised a recording in-process made
+# every child look as large as itself.
+_PEAK_AT_EXIT = """
+import atexit as _atexit, sys as _sys
+def _peak():
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmHWM:"):
+                print("bench-speed-peak-kib", line.split()[1], file=_sys.stderr, flush=True)
+_atexit.register(_peak)
+"""
+_PEAK_MARK = "bench-speed-peak-kib"
+
+
+def _peak_mib(stderr: str) -> float | None:
+    """The child's own peak RSS (MiB) that `_PEAK_AT_EXIT` printed, if it did."""
+    for line in reversed(stderr.splitlines()):
+        if line.startswith(_PEAK_MARK):
+            return int(line.split()[1]) / 1024
+    return None
+
+
 def measured(args: list[str], ok: tuple[int, ...] = (0,)) -> Measured:
-    """Run `args` in a fresh process; its CPU seconds, wall seconds and peak RSS (rusage)."""
+    """Run `args` (`python -c SCRIPT ...`) in a fresh process; its CPU and wall seconds (rusage)
+    and its own peak RSS (`_PEAK_AT_EXIT`)."""
+    if args[1] == "-c":
+        args = [args[0], "-c", _PEAK_AT_EXIT + args[2], *args[3:]]
     started = time.perf_counter()
     child = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert child.stdout is not None and child.stderr is not None
@@ -148,7 +175,10 @@ def measured(args: list[str], ok: tuple[int, ...] = (0,)) -> Measured:
     child.returncode = os.waitstatus_to_exitcode(status)
     if child.returncode not in ok:
         raise RuntimeError(f"{' '.join(args[:4])} exited {child.returncode}:\n{stderr[-2000:]}")
-    return Measured(usage.ru_utime + usage.ru_stime, wall, usage.ru_maxrss / 1024, stdout)
+    peak = _peak_mib(stderr)
+    if peak is None:
+        raise RuntimeError(f"{args[0]} did not report its peak memory:\n{stderr[-2000:]}")
+    return Measured(usage.ru_utime + usage.ru_stime, wall, peak, stdout)
 
 
 def recording(scenario: str, cache: Path, seed: int, rate_scale: float = 1.0) -> Path:
