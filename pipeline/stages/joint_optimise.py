@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.config import PipelineConfig
-from pipeline.metric import metric_error
+from pipeline.metric import MetricError, metric_error
 from pipeline.optimisation import OptimisationResult, optimise
 from pipeline.stages.runner import IterationProgress, Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail
@@ -31,24 +31,24 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     starts = 1 if state.second_start is None else 2
     result = _optimise_from(state, config, listeners, (state.T_G_ref, state.T_ref_lidar), starts)
     details: dict[str, Detail] = {}
+    kept_metric: MetricError | None = None
     if state.second_start is not None:
         other = _optimise_from(
             state, config, listeners, state.second_start, starts, done_before=result.iterations
         )
         objects = state.objects_in_lidar()
-        first_error, second_error = (
-            metric_error(objects, x.T_G_ref, x.T_ref_lidar, config.metric).value
-            for x in (result, other)
+        first, second = (
+            metric_error(objects, x.T_G_ref, x.T_ref_lidar, config.metric) for x in (result, other)
         )
+        second_kept = second.value < first.value
         details.update(
             starts=2,
-            metric_error_m=first_error,
-            second_start_metric_error_m=second_error,
-            second_start_kept=bool(second_error < first_error),
+            metric_error_m=first.value,
+            second_start_metric_error_m=second.value,
+            second_start_kept=second_kept,
             iterations_all_starts=result.iterations + other.iterations,
         )
-        if second_error < first_error:
-            result = other
+        result, kept_metric = (other, second) if second_kept else (result, first)
     details.update(
         iterations=result.iterations,
         converged=result.converged,
@@ -56,7 +56,12 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         residual_rms_m=result.residual_rms_m,
     )
     new_state = dataclasses.replace(
-        state, optimised=result, T_G_ref=result.T_G_ref, T_ref_lidar=result.T_ref_lidar
+        state,
+        optimised=result,
+        T_G_ref=result.T_G_ref,
+        T_ref_lidar=result.T_ref_lidar,
+        # The metric stage reuses what the choice between two starts measured.
+        metric_final=kept_metric,
     )
     message = (
         f"{result.iterations} iterations, {'converged' if result.converged else 'NOT converged'}"

@@ -94,7 +94,9 @@ class CalibrationState:
     time, which segmentation reports); `filtered(lidar, stop)` gives a cloud as stage 2 sees it.
     `floor_refinement` is None when stage 3 is disabled. `second_start` (`T_G_ref`,
     `T_ref_lidar`): another start for stage 4 (global alignment's candidate when it is to be
-    judged after refinement), None when there is none."""
+    judged after refinement), None when there is none. `metric_final` is the metric of the
+    current poses: stage 4 leaves it where it chose between two starts by it (no stage after
+    stage 4 moves the poses), the metric stage otherwise."""
 
     lidars: tuple[LidarInfo, ...]
     clouds_in_lidar: PerCloud[Points]

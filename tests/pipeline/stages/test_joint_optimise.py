@@ -53,3 +53,23 @@ def test_with_two_starts_iterations_are_counted_on_so_progress_never_goes_back()
     assert done == list(range(1, len(done) + 1))
     assert len(done) == outcome.details["iterations_all_starts"]
     assert {limit for _, limit in heard} == {2 * PipelineConfig().optimisation.max_iterations}
+
+
+def test_the_metric_that_chose_between_two_starts_is_the_one_the_metric_stage_reports() -> None:
+    from pipeline.metric import metric_error
+    from pipeline.stages import measure
+
+    near = _after_stage_3()
+    far = _pushed_far(near)
+    state = dataclasses.replace(near, second_start=(far.T_G_ref, far.T_ref_lidar))
+    config = PipelineConfig()
+    optimised = joint_optimise.run(state, config, Listeners()).state
+    assert optimised.metric_final is not None
+    measured = measure.run(optimised, config, Listeners()).state
+    assert measured.metric_final is optimised.metric_final
+    again = metric_error(
+        optimised.objects_in_lidar(), optimised.T_G_ref, optimised.T_ref_lidar, config.metric
+    )
+    assert again.value == optimised.metric_final.value
+    single = joint_optimise.run(near, config, Listeners()).state
+    assert single.metric_final is None
