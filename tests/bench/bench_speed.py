@@ -40,7 +40,10 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
+from typing import TYPE_CHECKING, Any  # noqa: E402
+
+if TYPE_CHECKING:
+    from pipeline.synth.scenarios import ScenarioSpec
 
 DEFAULT_SCENARIOS = ("set1-box", "set2-box")
 DEFAULT_RANDOM_SEEDS = (1000, 1001, 1002, 1003)
@@ -184,7 +187,6 @@ def measured(args: list[str], ok: tuple[int, ...] = (0,)) -> Measured:
 def recording(scenario: str, cache: Path, seed: int, rate_scale: float = 1.0) -> Path:
     """The recording of `scenario` (a named one, or `random-N`: `fleetcal synth random --seed
     N`) at `rate_scale` of the point rate, synthesised into `cache` on first use."""
-    from pipeline.synth.random_scenario import random_scenario
     from pipeline.synth.recording import RECORDING_DIR, write_recording
 
     name = f"{scenario}-seed{seed}" + ("" if rate_scale == 1.0 else f"-rate{rate_scale:g}")
@@ -194,29 +196,32 @@ def recording(scenario: str, cache: Path, seed: int, rate_scale: float = 1.0) ->
         if partial.exists():
             shutil.rmtree(partial)  # left by an interrupted run: synthesise it again
         started = time.perf_counter()
-        spec = random_scenario(int(scenario.split("-")[1])) if _is_random(scenario) else scenario
-        write_recording(spec, partial, seed=seed, rate_scale=rate_scale)
+        write_recording(scenario_spec(scenario), partial, seed=seed, rate_scale=rate_scale)
         partial.rename(done)
         print(f"synthesised {name} in {time.perf_counter() - started:.0f} s", file=sys.stderr)
     return done / RECORDING_DIR
 
 
-def _is_random(scenario: str) -> bool:
-    return scenario.startswith("random-")
+def _random_seed(scenario: str) -> int | None:
+    """N for `random-N` (`fleetcal synth random --seed N`), None for a named scenario."""
+    prefix = "random-"
+    return int(scenario.removeprefix(prefix)) if scenario.startswith(prefix) else None
 
 
-def _random_seed_of(scenario: str, seed: int) -> int:
-    """The synthesiser's seed: a random scenario's own seed, as `fleetcal synth random` uses."""
-    return int(scenario.split("-")[1]) if _is_random(scenario) else seed
+def scenario_spec(scenario: str) -> ScenarioSpec:
+    """The spec of a named scenario or of `random-N`."""
+    from pipeline.synth.random_scenario import random_scenario
+    from pipeline.synth.scenarios import get_scenario
+
+    seed = _random_seed(scenario)
+    return get_scenario(scenario) if seed is None else random_scenario(seed)
 
 
 def describe_scenario(scenario: str) -> str:
     """`random-1000 (rotate/spinning/large)` for a random scenario, else the name."""
-    if not _is_random(scenario):
+    if _random_seed(scenario) is None:
         return scenario
-    from pipeline.synth.random_scenario import random_scenario
-
-    return f"{scenario} ({random_scenario(int(scenario.split('-')[1])).scenario_class})"
+    return f"{scenario} ({scenario_spec(scenario).scenario_class})"
 
 
 def _stops(motion: Any) -> int:
@@ -298,9 +303,6 @@ def bench(path: Path) -> list[tuple[str, Measured, str]]:
 
 def scaling_table(cache: Path, seed: int, random_seeds: list[int]) -> None:
     """`--scaling`: (a) and (b) per recording, with its size, LiDARs, stops and points."""
-    from pipeline.synth.random_scenario import random_scenario
-    from pipeline.synth.scenarios import get_scenario
-
     cases = [("set1-box", seed, rate) for rate in SCALING_RATES]
     cases += [(f"random-{n}", n, 1.0) for n in random_seeds]
     print(
@@ -310,7 +312,7 @@ def scaling_table(cache: Path, seed: int, random_seeds: list[int]) -> None:
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for scenario, synth_seed, rate in cases:
         path = recording(scenario, cache, synth_seed, rate)
-        spec = random_scenario(synth_seed) if _is_random(scenario) else get_scenario(scenario)
+        spec = scenario_spec(scenario)
         raw, _, points = raw_read(path)
         cli, _ = calibrate_cli(path)
         print(
@@ -346,7 +348,8 @@ def main() -> None:
 
     scenarios = [*args.scenario, *(f"random-{n}" for n in args.random_seeds)]
     paths = {
-        scenario: recording(scenario, args.cache, _random_seed_of(scenario, args.seed))
+        # A random scenario is synthesised with its own seed, as `fleetcal synth random` does.
+        scenario: recording(scenario, args.cache, _random_seed(scenario) or args.seed)
         for scenario in scenarios
     }
     print("| scenario | MB | what | CPU s | wall s | peak RSS MiB | CPU / (a) | detail |")
