@@ -309,19 +309,30 @@ def main(argv: Sequence[str] | None = None) -> None:
         choices=get_args(SegmentationConfig.model_fields["surface_model"].annotation),
         default=None,
     )
+    parser.add_argument(
+        "--surface-debias",
+        choices=get_args(SegmentationConfig.model_fields["surface_debias"].annotation),
+        default=None,
+    )
     args = parser.parse_args(argv)
     from tests.bench.bench_random import parse_seeds
 
     config = PipelineConfig()
-    if args.surface_model is not None:
-        config = config.model_copy(
-            update={
-                "segmentation": config.segmentation.model_copy(
-                    update={"surface_model": args.surface_model}
-                )
-            }
+    changes = {
+        name: value
+        for name, value in (
+            ("surface_model", args.surface_model),
+            ("surface_debias", args.surface_debias),
         )
-    print(f"surface model: {config.segmentation.surface_model}; behind/ray > 0: behind the surface")
+        if value is not None
+    }
+    config = config.model_copy(
+        update={"segmentation": config.segmentation.model_copy(update=changes)}
+    )
+    print(
+        f"surface model: {config.segmentation.surface_model}, debias "
+        f"{config.segmentation.surface_debias}; behind/ray > 0: behind the surface"
+    )
     print("\nSynthetic: one object 3 m ahead, spinning LiDAR, 10 scans")
     print(HEADER.format(label="object / range noise"))
     for kind in ("cylinder", "box"):
