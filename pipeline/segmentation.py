@@ -103,6 +103,14 @@ class SegmentationConfig(BaseModel):
         "(set1-box 2.69 against 1.93 and set2-box 2.46 against 2.03 worse, driven 3.61 against "
         "3.91 and set1-capsule 1.54 against 2.05 better); a trial takes 15-30 % longer",
     )
+    surface_passes: int = Field(
+        default=1,
+        ge=1,
+        description="projections of the object points onto their local surfaces, each from "
+        "where the last left them over the same neighbours (`local_planes`): one pass leaves "
+        "a sheet several millimetres thick under heavy range noise, and pairing points with "
+        "the nearest point of a thick sheet flattens the cost across it (docs/method.md)",
+    )
     surface_centre_neighbours: int | None = Field(
         default=10,
         ge=1,
@@ -474,6 +482,7 @@ def _smoothed(objects: Points, config: SegmentationConfig) -> tuple[Points, Poin
             quadric=config.surface_model != "plane",
             along_beams=config.surface_model in ("beam_quadric", "beam_fit"),
             normals_along_beams=config.surface_model == "beam_fit",
+            passes=config.surface_passes,
         )
 
     projected, normals = fit(objects)

@@ -21,6 +21,7 @@ def local_planes(
     quadric: bool = False,
     along_beams: bool = False,
     normals_along_beams: bool = False,
+    passes: int = 1,
 ) -> tuple[Points, Points]:
     """Each point projected onto its local surface, and that surface's unit normal there:
     (N, 3), (N, 3).
@@ -52,11 +53,41 @@ def local_planes(
     patch's spread along the surface: the smaller the patch, the larger the tilt), while
     C^-1 b, whose residuals are distances along the beam, is not tilted by it (noise-free
     regressors: errors-in-variables only in the heights).
+
+    `passes` > 1 projects the projected points again, over the same neighbourhoods, each pass
+    starting from where the last left them (moving least squares iterated towards its fixed
+    point, the MLS surface). One pass moves a point only part of the way where range noise
+    tilts and shifts its patch's frame, so under heavy noise the projected points still form a
+    sheet several millimetres thick; every further pass thins it (see `SegmentationConfig`).
     """
     if len(points) < 3:
         return points.copy(), np.tile(np.array([0.0, 0.0, 1.0]), (len(points), 1))
     k = min(neighbours, len(points))
     _, idx = KDTree(points).query(points, k=k)
+    projected, normals = points, np.zeros_like(points)
+    for _ in range(max(passes, 1)):
+        projected, normals = _project(
+            projected,
+            idx,
+            centre_neighbours,
+            quadric=quadric,
+            along_beams=along_beams,
+            normals_along_beams=normals_along_beams,
+        )
+    return projected, normals
+
+
+def _project(
+    points: Points,
+    idx: NDArray[np.integer],
+    centre_neighbours: int | None,
+    *,
+    quadric: bool,
+    along_beams: bool,
+    normals_along_beams: bool,
+) -> tuple[Points, Points]:
+    """One pass of `local_planes` over the neighbourhoods `idx` (N, k) of `points`."""
+    k = idx.shape[1]
     # One contiguous (N, k) array per axis: strided views of an (N, k, 3) gather are slower.
     x, y, z = (points[:, axis][idx] for axis in range(3))
     centroid = np.column_stack([x.mean(axis=1), y.mean(axis=1), z.mean(axis=1)])
