@@ -145,6 +145,7 @@ CONFIG_METHODS = (
     "surface_debias",
     "global_refined",
     "without_global_alignment",
+    "surface_passes2",
     "surface_passes4",
 )
 """Methods that are the pipeline with another configuration."""
@@ -169,8 +170,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_model"] = "beam_fit"
     elif method == "surface_k30":
         data["segmentation"]["surface_neighbours"] = 30
-    elif method == "surface_passes4":
-        data["segmentation"]["surface_passes"] = 4
+    elif method in ("surface_passes2", "surface_passes4"):
+        data["segmentation"]["surface_passes"] = int(method[-1])
     elif method == "global_alignment":
         data["global_alignment"]["enabled"] = True
         data["global_alignment"]["choose"] = "score"
