@@ -8,6 +8,7 @@ import pytest
 
 from tests.bench.bench_random import (
     SeedResult,
+    comparisons,
     grouped_table,
     parse_seeds,
     parse_worlds,
@@ -200,3 +201,18 @@ def test_cached_results_of_a_world_are_read_back_not_recomputed(tmp_path: Path) 
     path.write_text(__import__("json").dumps(record.__dict__))
     assert run_seed(tmp_path, 0.1, 42, ["proposed"], "room") == [record]
     assert not (tmp_path / "recordings").exists()
+
+
+def test_every_method_is_compared_with_the_default_and_the_fixed_pairs_keep_their_order() -> None:
+    assert comparisons(["proposed", "surface_passes4", "beam_fit"]) == [
+        ("surface_passes4", "proposed"),
+        ("beam_fit", "proposed"),
+    ]
+    assert comparisons(["proposed", "point_to_point"]) == [("proposed", "point_to_point")]
+    assert comparisons(["with_stage1", "without_stage1"]) == [("with_stage1", "without_stage1")]
+    records = [
+        _record(1, 3.0, 0.05, True),
+        _record(1, 2.0, 0.04, True, method="surface_passes4"),
+    ]
+    text = report(records, ["proposed", "surface_passes4"])
+    assert "## surface_passes4 against proposed, recording by recording" in text
