@@ -108,11 +108,11 @@ class SegmentationConfig(BaseModel):
         ge=1,
         description="projections of the object points onto their local surfaces, each from "
         "where the last left them over the same neighbours (`local_planes`): one pass leaves "
-        "a sheet several millimetres thick under heavy range noise, and pairing points with "
-        "the nearest point of a thick sheet flattens the cost across it. Opt-in: over "
-        "bench_random seeds 1040-1069 four passes remove the false pass (seed 1060, 10.1 -> 4.6 "
-        "mm) and help mixed sensors, but hurt the rosettes' figure-eights (+0.6 mm) and cost "
-        "20-35 % more time (docs/method.md)",
+        "a sheet several millimetres thick under heavy range noise, whose positions and "
+        "normals move the cost's minimum off the truth (seed 1060). Opt-in: over bench_random "
+        "seeds 1040-1089 four passes remove the false pass (seed 1060, 10.1 -> 4.6 mm) and "
+        "help mixed and spinning sensors, but hurt the rosettes' figure-eights (+0.6 mm) and "
+        "cost 15-48 % more time (docs/method.md)",
     )
     surface_centre_neighbours: int | None = Field(
         default=10,
