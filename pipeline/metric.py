@@ -15,6 +15,7 @@ matches under any x, y and yaw and would hide exactly the errors this is meant t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -23,7 +24,8 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 from pykdtree.kdtree import KDTree
 
-from pipeline.transforms import Points
+from pipeline.geometry import voxel_keys
+from pipeline.transforms import Points, pose_difference
 
 
 class MetricConfig(BaseModel):
@@ -71,21 +73,101 @@ def metric_error(
 ) -> MetricError:
     """Eq. 12 for `objects[lidar][stop]` ((N, 3) in the LiDAR's frame; LiDAR 0 the reference)
     placed with `T_G_ref` (J, 4, 4) and `T_ref_lidar` (L, 4, 4)."""
+    distances = capped_distances(objects, T_G_ref, T_ref_lidar, config)
+    per_lidar = [float("nan")] + [
+        float(np.mean(d.capped)) if len(d.capped) else float("nan") for d in distances[1:]
+    ]
+    counts = [len(d.points_G) for d in distances]
+    every = np.concatenate([np.zeros(0)] + [d.capped for d in distances[1:]])
+    value = float(np.mean(every)) if len(every) else float("nan")
+    return MetricError(value=value, per_lidar=tuple(per_lidar), points=tuple(counts))
+
+
+@dataclass(frozen=True)
+class CappedDistances:
+    """One LiDAR's object points placed in G (N, 3) and, for a non-reference LiDAR, each one's
+    distance to the reference's map capped at `max_distance_m` (N,; empty for the reference and
+    where the reference has no points)."""
+
+    points_G: Points
+    capped: NDArray[np.float64]
+
+
+def capped_distances(
+    objects: Sequence[Sequence[Points]],
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    config: MetricConfig,
+) -> list[CappedDistances]:
+    """Per LiDAR (reference first), what eq. 12 averages: see `CappedDistances`."""
     reference = place(objects[0], T_G_ref, T_ref_lidar, 0)
-    per_lidar = [float("nan")]
-    counts = [len(reference)]
-    total, count = 0.0, 0
+    out = [CappedDistances(reference, np.zeros(0))]
     tree = KDTree(reference) if len(reference) else None
     for lidar in range(1, len(objects)):
         points = place(objects[lidar], T_G_ref, T_ref_lidar, lidar)
-        counts.append(len(points))
         if tree is None or len(points) == 0:
-            per_lidar.append(float("nan"))
+            out.append(CappedDistances(points, np.zeros(0)))
             continue
         distance, _ = tree.query(points, k=1)
-        capped = np.minimum(distance, config.max_distance_m)
-        per_lidar.append(float(np.mean(capped)))
-        total += float(np.sum(capped))
-        count += len(points)
-    value = total / count if count else float("nan")
-    return MetricError(value=value, per_lidar=tuple(per_lidar), points=tuple(counts))
+        out.append(CappedDistances(points, np.minimum(distance, config.max_distance_m)))
+    return out
+
+
+@dataclass(frozen=True)
+class SolutionComparison:
+    """Two solutions of stage 4 on the same object points, the kept one against the other.
+
+    `apart_translation_m` / `apart_rotation_deg`: how far apart their extrinsics lie (the
+    largest over the non-reference LiDARs). `difference_m`: how much nearer the reference's map
+    the kept solution places the points, point by point (eq. 12 of the other less eq. 12 of the
+    kept: positive when the kept one fits better). `stderr_m`: that difference's standard error,
+    a leave-one-block-out jackknife over `blocks` cubic blocks of space (the points of one surface
+    patch err together, so they are left out together)."""
+
+    apart_translation_m: float
+    apart_rotation_deg: float
+    difference_m: float
+    stderr_m: float
+    blocks: int
+
+    @property
+    def separation_sigmas(self) -> float:
+        """`difference_m` in standard errors (infinite for a difference without spread)."""
+        if self.stderr_m > 0.0:
+            return self.difference_m / self.stderr_m
+        return math.inf if self.difference_m > 0.0 else 0.0
+
+
+def compare_solutions(
+    objects: Sequence[Sequence[Points]],
+    kept: tuple[NDArray[np.float64], NDArray[np.float64]],
+    other: tuple[NDArray[np.float64], NDArray[np.float64]],
+    config: MetricConfig,
+    block_m: float,
+) -> SolutionComparison:
+    """`SolutionComparison` of the solutions `kept` and `other` (each `(T_G_ref, T_ref_lidar)`)
+    for `objects[lidar][stop]`; the blocks (edge `block_m`, metres) are cells of G where the
+    kept solution places the points."""
+    ours = capped_distances(objects, *kept, config)
+    theirs = capped_distances(objects, *other, config)
+    difference = np.concatenate(
+        [np.zeros(0)] + [t.capped - o.capped for o, t in zip(ours[1:], theirs[1:], strict=True)]
+    )
+    placed = np.concatenate([np.zeros((0, 3))] + [o.points_G for o in ours[1:] if len(o.capped)])
+    apart = [pose_difference(a, b) for a, b in zip(kept[1][1:], other[1][1:], strict=True)]
+    translation = max((t for t, _ in apart), default=0.0)
+    rotation = max((r for _, r in apart), default=0.0)
+    if len(difference) == 0:
+        return SolutionComparison(translation, rotation, math.nan, math.nan, 0)
+    keys = voxel_keys(placed, block_m, "optimisation.uncertainty_block_m")
+    _, block_of = np.unique(keys, return_inverse=True)
+    block_of = block_of.reshape(-1)
+    n = int(block_of.max()) + 1
+    sums = np.bincount(block_of, weights=difference, minlength=n)
+    counts = np.bincount(block_of, minlength=n)
+    mean = float(np.mean(difference))
+    if n < 2:
+        return SolutionComparison(translation, rotation, mean, math.nan, n)
+    left_out = (sums.sum() - sums) / (counts.sum() - counts)
+    stderr = float(np.sqrt((n - 1) / n * np.sum((left_out - left_out.mean()) ** 2)))
+    return SolutionComparison(translation, rotation, mean, stderr, n)

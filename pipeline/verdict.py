@@ -39,6 +39,21 @@ class VerdictConfig(BaseModel):
         default=None, gt=0, description="largest accepted change from the initial T_base_lidar"
     )
     max_deviation_rotation_deg: float | None = Field(default=None, gt=0)
+    min_start_separation_sigmas: float | None = Field(
+        default=3.0,
+        gt=0,
+        description="where stage 4 ran from two starts and they ended further apart than "
+        "starts_apart_translation_m or starts_apart_rotation_deg, the kept solution must place "
+        "the points nearer the reference's map by this many standard errors (a jackknife over "
+        "blocks of space), else the recording fits two calibrations alike and the verdict fails "
+        "as ambiguous (bench_random seed 1066: starts 1.5 and 2.1 m off the truth, 0.9 "
+        "standard errors apart; seed 1001: the kept start right, the other 1.2 m off and 3.2 "
+        "standard errors worse). None skips the check",
+    )
+    starts_apart_translation_m: float = Field(
+        default=0.01, gt=0, description="two solutions this far apart are two calibrations"
+    )
+    starts_apart_rotation_deg: float = Field(default=0.3, gt=0)
 
 
 @dataclass(frozen=True)
@@ -92,6 +107,17 @@ class DriftEvidence:
 
 
 @dataclass(frozen=True)
+class StartsEvidence:
+    """Stage 4's two solutions, where global alignment gave it a second start: how far apart they
+    ended (the largest over the non-reference LiDARs) and how much nearer the reference's map the
+    kept one places the points, in standard errors of that difference."""
+
+    apart_translation_m: float
+    apart_rotation_deg: float
+    separation_sigmas: float
+
+
+@dataclass(frozen=True)
 class Evidence:
     """Everything a verdict is judged on. It stays with the verdict so that evidence found later
     (drift, in the worker) is judged with the rest (`with_drift`), never added to a verdict."""
@@ -102,6 +128,7 @@ class Evidence:
     max_iterations: int
     lidars: tuple[LidarEvidence, ...]
     drift: DriftEvidence | None = None
+    starts: StartsEvidence | None = None
 
 
 @dataclass(frozen=True)
@@ -125,9 +152,12 @@ def judge(
     config: VerdictConfig,
     *,
     drift: DriftEvidence | None = None,
+    starts: StartsEvidence | None = None,
 ) -> Verdict:
     """Run every check; the verdict passes when all of them pass."""
-    evidence = Evidence(metric_error_m, converged, iterations, max_iterations, tuple(lidars), drift)
+    evidence = Evidence(
+        metric_error_m, converged, iterations, max_iterations, tuple(lidars), drift, starts
+    )
     return judge_evidence(evidence, config)
 
 
@@ -174,7 +204,30 @@ def _run_checks(evidence: Evidence, config: VerdictConfig) -> list[Check]:
                 "" if converged else f"no convergence within {limit} iterations",
             )
         )
+    if evidence.starts is not None and config.min_start_separation_sigmas is not None:
+        checks.append(_unique_solution(evidence.starts, config, config.min_start_separation_sigmas))
     return checks
+
+
+def _unique_solution(starts: StartsEvidence, config: VerdictConfig, needed: float) -> Check:
+    """Whether the kept one of stage 4's two solutions is the only calibration the data support:
+    the two ended as one, or the maps prefer the kept one by `needed` standard errors."""
+    apart = (
+        starts.apart_translation_m > config.starts_apart_translation_m
+        or starts.apart_rotation_deg > config.starts_apart_rotation_deg
+    )
+    sigmas = starts.separation_sigmas
+    passed = not apart or sigmas >= needed
+    detail = (
+        ""
+        if passed
+        else f"the recording fits two calibrations {starts.apart_translation_m:.3f} m / "
+        f"{starts.apart_rotation_deg:.2f} deg apart almost alike (the kept one lies nearer the "
+        f"reference's map by {sigmas:.1f} standard errors, {needed:g} needed): record again "
+        "with objects that tell them apart (fewer look-alike objects, more turning) or from "
+        "an initial guess nearer the truth"
+    )
+    return Check("unique_solution", sigmas, needed, passed, detail)
 
 
 def _lidar_checks(lidar: LidarEvidence, config: VerdictConfig) -> list[Check]:

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.config import PipelineConfig
-from pipeline.metric import MetricError, metric_error
+from pipeline.metric import MetricError, SolutionComparison, compare_solutions, metric_error
 from pipeline.optimisation import OptimisationResult, optimise
 from pipeline.stages.runner import IterationProgress, Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail
@@ -27,11 +27,14 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     every iteration. With a second start (global alignment's candidate) the optimisation runs
     from both and keeps the solution whose non-reference points lie nearer the reference's map
     (the metric error, eq. 12: distances capped, so surfaces the reference never saw weigh
-    alike in both). Iterations are counted on over the two runs, so progress never goes back."""
+    alike in both), and compares the two point by point: where they end apart and the maps
+    cannot tell them apart, the verdict says the data are ambiguous (`SolutionComparison`).
+    Iterations are counted on over the two runs, so progress never goes back."""
     starts = 1 if state.second_start is None else 2
     result = _optimise_from(state, config, listeners, (state.T_G_ref, state.T_ref_lidar), starts)
     details: dict[str, Detail] = {}
     kept_metric: MetricError | None = None
+    comparison: SolutionComparison | None = None
     if state.second_start is not None:
         other = _optimise_from(
             state, config, listeners, state.second_start, starts, done_before=result.iterations
@@ -48,7 +51,21 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
             second_start_kept=second_kept,
             iterations_all_starts=result.iterations + other.iterations,
         )
-        result, kept_metric = (other, second) if second_kept else (result, first)
+        kept, dropped = (other, result) if second_kept else (result, other)
+        comparison = compare_solutions(
+            objects,
+            (kept.T_G_ref, kept.T_ref_lidar),
+            (dropped.T_G_ref, dropped.T_ref_lidar),
+            config.metric,
+            config.optimisation.uncertainty_block_m,
+        )
+        details.update(
+            starts_apart_m=comparison.apart_translation_m,
+            starts_apart_deg=comparison.apart_rotation_deg,
+            kept_start_nearer_m=comparison.difference_m,
+            kept_start_nearer_stderr_m=comparison.stderr_m,
+        )
+        result, kept_metric = kept, (second if second_kept else first)
     details.update(
         iterations=result.iterations,
         converged=result.converged,
@@ -62,6 +79,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         T_ref_lidar=result.T_ref_lidar,
         # The metric stage reuses what the choice between two starts measured.
         metric_final=kept_metric,
+        start_comparison=comparison,
     )
     message = (
         f"{result.iterations} iterations, {'converged' if result.converged else 'NOT converged'}"

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from pipeline.denoise import KeepMask
 from pipeline.geometry import Plane
-from pipeline.metric import MetricError
+from pipeline.metric import MetricError, SolutionComparison
 from pipeline.observability import PoseUncertainty
 from pipeline.optimisation import OptimisationResult
 from pipeline.problem import LidarInfo
@@ -96,7 +96,8 @@ class CalibrationState:
     `T_ref_lidar`): another start for stage 4 (global alignment's candidate when it is to be
     judged after refinement), None when there is none. `metric_final` is the metric of the
     current poses: stage 4 leaves it where it chose between two starts by it (no stage after
-    stage 4 moves the poses), the metric stage otherwise."""
+    stage 4 moves the poses), the metric stage otherwise. `start_comparison`: stage 4's two
+    solutions side by side, None when it had one start."""
 
     lidars: tuple[LidarInfo, ...]
     clouds_in_lidar: PerCloud[Points]
@@ -116,6 +117,7 @@ class CalibrationState:
     optimised: OptimisationResult | None = None
     metric_initial: MetricError | None = None
     metric_final: MetricError | None = None
+    start_comparison: SolutionComparison | None = None
     T_base_ref_calibrated: Matrix4 | None = None
     uncertainties: tuple[PoseUncertainty, ...] | None = None
     calibrations: tuple[LidarCalibration, ...] | None = None

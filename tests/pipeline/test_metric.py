@@ -1,6 +1,7 @@
 import numpy as np
+import pytest
 
-from pipeline.metric import MetricConfig, metric_error
+from pipeline.metric import MetricConfig, compare_solutions, metric_error
 
 
 def _plane(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -28,3 +29,32 @@ def test_far_points_count_at_the_cap_and_empty_maps_give_nan() -> None:
     assert capped.value == 0.1
     empty = metric_error([[reference], [far[:0]]], poses, extrinsics, MetricConfig())
     assert np.isnan(empty.value)
+
+
+def _two_planes(rng: np.random.Generator) -> list[list[np.ndarray]]:
+    """A reference and another LiDAR seeing the same 2 x 2 m floor patch, one stop."""
+    big = np.column_stack([rng.uniform(-1.0, 1.0, (20_000, 2)), np.zeros(20_000)])
+    return [[big], [big[:4000] + rng.normal(0.0, 0.002, (4000, 3))]]
+
+
+def test_two_solutions_that_agree_are_not_apart_and_fit_alike() -> None:
+    objects = _two_planes(np.random.default_rng(2))
+    solution = (np.stack([np.eye(4)]), np.stack([np.eye(4), np.eye(4)]))
+    compared = compare_solutions(objects, solution, solution, MetricConfig(), block_m=0.5)
+    assert compared.apart_translation_m == 0.0 and compared.apart_rotation_deg == 0.0
+    assert compared.difference_m == 0.0 and compared.separation_sigmas == 0.0
+    assert compared.blocks >= 16
+
+
+def test_a_solution_that_lifts_the_points_off_the_map_fits_worse_by_many_standard_errors() -> None:
+    objects = _two_planes(np.random.default_rng(3))
+    kept = (np.stack([np.eye(4)]), np.stack([np.eye(4), np.eye(4)]))
+    lifted = np.eye(4)
+    lifted[2, 3] = 0.03
+    other = (kept[0], np.stack([np.eye(4), lifted]))
+    compared = compare_solutions(objects, kept, other, MetricConfig(), block_m=0.5)
+    assert compared.apart_translation_m == pytest.approx(0.03)
+    assert compared.difference_m == pytest.approx(0.03, abs=0.003)
+    assert compared.separation_sigmas > 10.0
+    swapped = compare_solutions(objects, other, kept, MetricConfig(), block_m=0.5)
+    assert swapped.separation_sigmas < -10.0

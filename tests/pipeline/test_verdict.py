@@ -5,6 +5,7 @@ import pytest
 from pipeline.verdict import (
     DriftEvidence,
     LidarEvidence,
+    StartsEvidence,
     Verdict,
     VerdictConfig,
     judge,
@@ -118,3 +119,35 @@ def test_a_lidar_the_reference_knows_but_the_run_did_not_calibrate_fails() -> No
 def test_a_verdict_made_without_judge_cannot_take_drift() -> None:
     with pytest.raises(ValueError, match="judge it anew"):
         with_drift(Verdict(True, ()), DriftEvidence("design", {}))
+
+
+@pytest.mark.parametrize(
+    ("apart_m", "apart_deg", "sigmas", "passed"),
+    [
+        (0.002, 0.05, 0.0, True),  # both starts ended as one calibration
+        (1.2, 0.04, 3.2, True),  # apart, but the maps prefer the kept one decisively
+        (3.5, 9.1, 0.8, False),  # apart, and the maps cannot tell them apart
+        (0.004, 0.5, 1.0, False),  # a rotation apart is as ambiguous as a translation
+    ],
+)
+def test_two_starts_that_end_apart_must_be_told_apart_by_the_maps(
+    apart_m: float, apart_deg: float, sigmas: float, passed: bool
+) -> None:
+    lidars = [_lidar("a", is_reference=True), _lidar("b")]
+    starts = StartsEvidence(apart_m, apart_deg, sigmas)
+    verdict = judge(0.004, True, 30, 200, lidars, VerdictConfig(), starts=starts)
+    check = next(c for c in verdict.checks if c.name == "unique_solution")
+    assert check.passed is passed and verdict.passed is passed
+    assert (check.value, check.limit) == (sigmas, VerdictConfig().min_start_separation_sigmas)
+    if not passed:
+        assert f"{apart_m:.3f} m" in check.detail and "record again" in check.detail
+
+
+def test_one_start_or_the_check_switched_off_judges_no_ambiguity() -> None:
+    lidars = [_lidar("a", is_reference=True), _lidar("b")]
+    alone = judge(0.004, True, 30, 200, lidars, VerdictConfig())
+    assert "unique_solution" not in {c.name for c in alone.checks}
+    off = VerdictConfig(min_start_separation_sigmas=None)
+    starts = StartsEvidence(3.5, 9.1, 0.8)
+    unchecked = judge(0.004, True, 30, 200, lidars, off, starts=starts)
+    assert unchecked.passed and "unique_solution" not in {c.name for c in unchecked.checks}

@@ -14,6 +14,7 @@ def test_one_start_reports_no_second() -> None:
     outcome = joint_optimise.run(_after_stage_3(), PipelineConfig(), Listeners())
     assert "starts" not in outcome.details
     assert outcome.state.optimised is not None
+    assert outcome.state.start_comparison is None
 
 
 def test_of_two_starts_the_solution_nearer_the_reference_map_is_kept_whichever_comes_first() -> (
@@ -40,6 +41,11 @@ def test_of_two_starts_the_solution_nearer_the_reference_map_is_kept_whichever_c
         optimised = outcome.state.optimised
         assert optimised is not None
         np.testing.assert_array_equal(outcome.state.T_ref_lidar, optimised.T_ref_lidar)
+        # Both starts end at the truth: one calibration, which the verdict need not question.
+        compared = outcome.state.start_comparison
+        assert compared is not None and compared.apart_translation_m < 0.005
+        assert details["starts_apart_m"] == compared.apart_translation_m
+        assert details["kept_start_nearer_m"] == compared.difference_m
 
 
 def test_with_two_starts_iterations_are_counted_on_so_progress_never_goes_back() -> None:
