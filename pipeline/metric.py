@@ -132,7 +132,10 @@ class SolutionComparison:
 
     @property
     def separation_sigmas(self) -> float:
-        """`difference_m` in standard errors (infinite for a difference without spread)."""
+        """`difference_m` in standard errors (infinite for a difference without spread; NaN
+        where there was nothing to compare or too few blocks to tell the spread)."""
+        if not (math.isfinite(self.difference_m) and math.isfinite(self.stderr_m)):
+            return math.nan
         if self.stderr_m > 0.0:
             return self.difference_m / self.stderr_m
         return math.inf if self.difference_m > 0.0 else 0.0

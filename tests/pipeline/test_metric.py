@@ -58,3 +58,17 @@ def test_a_solution_that_lifts_the_points_off_the_map_fits_worse_by_many_standar
     assert compared.separation_sigmas > 10.0
     swapped = compare_solutions(objects, other, kept, MetricConfig(), block_m=0.5)
     assert swapped.separation_sigmas < -10.0
+
+
+def test_one_block_of_points_cannot_tell_two_solutions_apart() -> None:
+    # Every point inside one 50 m block (the grid's cells start at the origin).
+    objects = [
+        [cloud + 5.0 for cloud in clouds] for clouds in _two_planes(np.random.default_rng(4))
+    ]
+    kept = (np.stack([np.eye(4)]), np.stack([np.eye(4), np.eye(4)]))
+    lifted = np.eye(4)
+    lifted[2, 3] = 0.03
+    compared = compare_solutions(
+        objects, kept, (kept[0], np.stack([np.eye(4), lifted])), MetricConfig(), block_m=50.0
+    )
+    assert compared.blocks == 1 and np.isnan(compared.separation_sigmas)

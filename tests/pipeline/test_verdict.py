@@ -151,3 +151,10 @@ def test_one_start_or_the_check_switched_off_judges_no_ambiguity() -> None:
     starts = StartsEvidence(3.5, 9.1, 0.8)
     unchecked = judge(0.004, True, 30, 200, lidars, off, starts=starts)
     assert unchecked.passed and "unique_solution" not in {c.name for c in unchecked.checks}
+
+
+def test_two_solutions_apart_with_no_measure_of_their_difference_fail() -> None:
+    lidars = [_lidar("a", is_reference=True), _lidar("b")]
+    starts = StartsEvidence(0.5, 1.0, math.nan)
+    verdict = judge(0.004, True, 30, 200, lidars, VerdictConfig(), starts=starts)
+    assert [c.name for c in verdict.failed] == ["unique_solution"]
