@@ -10,7 +10,10 @@
 judge changes by and 20-39 held out), every LiDAR at the stops `--draw-stops`, each filter
 judging every point: precision / recall / F per draw (pooled over its clouds), their mean and
 minimum, and CPU seconds per 100k points. `range_gap` runs twice: estimating the range noise and
-scan pattern from each cloud, and given the LiDAR model's.
+scan pattern from each cloud, and given the LiDAR model's. A last column is no filter
+(`LABEL_RULE`): it removes the points whose measured position lies farther than three range-noise
+sigmas from every true surface, the label's rule on the noisy point: how far range noise alone
+blurs the labels.
 
 Clouds are the stop clouds `simulate_problem` gives the pipeline (every LiDAR, every
 `--stop-step`-th stop, full point rate). Positive = a removed point that is truly bleeding;
@@ -192,6 +195,15 @@ def draw_filters(beam: BeamCloud) -> dict[str, Callable[[], DenoiseResult]]:
     return actions
 
 
+LABEL_RULE = "label rule on measured points (knows the true surfaces)"
+"""Not a filter: a point is removed where its measured position lies farther than three range-noise
+sigmas from every true surface, the label's rule applied to the noisy point instead of the
+noise-free one. It shows how far range noise alone blurs the labels: a filter may score above it
+(it pools many returns), but where it scores far above a filter, the filter misses what the point
+positions themselves show."""
+LABEL_SIGMAS = 3.0
+
+
 def bleeding_table(draws: int, stops: list[int], first: int = 0) -> str:
     """Markdown: per draw (seeds `first`..`first + draws - 1`), P / R / F of each filter; then
     mean and minimum F, seconds per 100k."""
@@ -214,6 +226,8 @@ def bleeding_table(draws: int, stops: list[int], first: int = 0) -> str:
                 keep = action().keep
                 cpu[label] += time.process_time() - started
                 tallies[label].add(keep, beam.cloud, nowhere)
+            by_rule = beam.surface_distance_m <= LABEL_SIGMAS * beam.range_noise_m
+            tallies[LABEL_RULE].add(by_rule, beam.cloud, nowhere)
         points += size
         labels = list(tallies)
         cells = []
@@ -245,7 +259,9 @@ def bleeding_table(draws: int, stops: list[int], first: int = 0) -> str:
         by = {p: f[[q == p for q in patterns]].mean() for p in ("rosette", "spinning")}
         summary.append(
             f"| {label} | {f.mean():.3f} | {f.min():.3f} | {by['rosette']:.3f} | "
-            f"{by['spinning']:.3f} | {cpu[label] / points * 1e5:.3f} |"
+            f"{by['spinning']:.3f} | "
+            + ("n/a" if label == LABEL_RULE else f"{cpu[label] / points * 1e5:.3f}")
+            + " |"
         )
     return "\n".join(head + rows + summary)
 

@@ -101,11 +101,14 @@ def f_score(keep: NDArray[np.bool_], is_bleeding: NDArray[np.bool_]) -> float:
 @dataclass(frozen=True)
 class BeamCloud:
     """A `LabelledCloud` rendered with a drawn bleeding model, with what its LiDAR model knows:
-    `range_noise_m` and `scan_pattern` (what a config may give the filter)."""
+    `range_noise_m` and `scan_pattern` (what a config may give the filter); and, known only to
+    the synthesiser, `surface_distance_m` (N,): each point's distance, as measured (range noise
+    included), to the nearest true surface (the label's rule applied to the noisy point)."""
 
     cloud: LabelledCloud
     range_noise_m: float
     scan_pattern: ScanPattern
+    surface_distance_m: NDArray[np.float64]
 
 
 def bleeding_stop_clouds(case: BleedingCase, stops: Sequence[int] = (0, 8)) -> Iterator[BeamCloud]:
@@ -115,12 +118,26 @@ def bleeding_stop_clouds(case: BleedingCase, stops: Sequence[int] = (0, 8)) -> I
     world = make_world(case.scenario, case.scene_seed, bleeding=case.bleeding)
     for i, mount in enumerate(world.spec.lidars):
         up = world.T_base_lidar_initial[i][:3, :3].T @ np.array([0.0, 0.0, 1.0])
+        pose_at = world.T_world_lidar(i)
+        period_s = world.scan_period_ns(i) / 1e9
         for j in stops:
-            scans = world.simulate_stop(i, j)
+            scans, distances = [], []
+            for k in world.stop_scans(i, j):
+                scan = world.simulate_scan(i, k)
+                # The robot stands still during a stop: one pose per scan.
+                T_world_lidar = pose_at(np.array([k * period_s]))[0]
+                placed = scan.points @ T_world_lidar[:3, :3].T + T_world_lidar[:3, 3]
+                scans.append(scan)
+                distances.append(world.scene.nearest_surface(placed)[0])
             cloud = LabelledCloud(
                 np.concatenate([s.points for s in scans]),
                 np.concatenate([s.is_bleeding for s in scans]),
                 np.asarray(mount.model.optical_axis, dtype=np.float64),
                 up,
             )
-            yield BeamCloud(cloud, mount.model.range_noise_m, mount.model.scan_pattern)
+            yield BeamCloud(
+                cloud,
+                mount.model.range_noise_m,
+                mount.model.scan_pattern,
+                np.concatenate(distances),
+            )

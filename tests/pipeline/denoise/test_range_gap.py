@@ -77,3 +77,8 @@ def test_a_drawn_beam_outside_the_benchmark_draws() -> None:
     ]
     is_bleeding = np.concatenate([b.cloud.is_bleeding for b in beams])
     assert f_score(np.concatenate(keep), is_bleeding) > 0.75
+    # The label's rule applied to the measured points (what the benchmark prints beside the
+    # filters) agrees with the labels only in part: 2 cm of range noise carries points across
+    # the three-sigma line both ways. Here it scores 0.67, below the filter, which pools returns.
+    by_rule = np.concatenate([b.surface_distance_m <= 3.0 * b.range_noise_m for b in beams])
+    assert 0.5 < f_score(by_rule, is_bleeding) < f_score(np.concatenate(keep), is_bleeding)
