@@ -73,7 +73,11 @@ def metric_error(
 ) -> MetricError:
     """Eq. 12 for `objects[lidar][stop]` ((N, 3) in the LiDAR's frame; LiDAR 0 the reference)
     placed with `T_G_ref` (J, 4, 4) and `T_ref_lidar` (L, 4, 4)."""
-    distances = capped_distances(objects, T_G_ref, T_ref_lidar, config)
+    return metric_of(capped_distances(objects, T_G_ref, T_ref_lidar, config))
+
+
+def metric_of(distances: Sequence[CappedDistances]) -> MetricError:
+    """Eq. 12 from the capped distances `capped_distances` measured (reference first)."""
     per_lidar = [float("nan")] + [
         float(np.mean(d.capped)) if len(d.capped) else float("nan") for d in distances[1:]
     ]
@@ -142,22 +146,24 @@ class SolutionComparison:
 
 
 def compare_solutions(
-    objects: Sequence[Sequence[Points]],
-    kept: tuple[NDArray[np.float64], NDArray[np.float64]],
-    other: tuple[NDArray[np.float64], NDArray[np.float64]],
-    config: MetricConfig,
+    kept: Sequence[CappedDistances],
+    other: Sequence[CappedDistances],
+    kept_T_ref_lidar: NDArray[np.float64],
+    other_T_ref_lidar: NDArray[np.float64],
     block_m: float,
 ) -> SolutionComparison:
-    """`SolutionComparison` of the solutions `kept` and `other` (each `(T_G_ref, T_ref_lidar)`)
-    for `objects[lidar][stop]`; the blocks (edge `block_m`, metres) are cells of G where the
-    kept solution places the points."""
-    ours = capped_distances(objects, *kept, config)
-    theirs = capped_distances(objects, *other, config)
+    """`SolutionComparison` of two solutions for the same object points, from what
+    `capped_distances` measured under each (reference first) and their extrinsics (L, 4, 4);
+    the blocks (edge `block_m`, metres) are cells of G where the kept solution places the
+    points."""
     difference = np.concatenate(
-        [np.zeros(0)] + [t.capped - o.capped for o, t in zip(ours[1:], theirs[1:], strict=True)]
+        [np.zeros(0)] + [t.capped - o.capped for o, t in zip(kept[1:], other[1:], strict=True)]
     )
-    placed = np.concatenate([np.zeros((0, 3))] + [o.points_G for o in ours[1:] if len(o.capped)])
-    apart = [pose_difference(a, b) for a, b in zip(kept[1][1:], other[1][1:], strict=True)]
+    placed = np.concatenate([np.zeros((0, 3))] + [o.points_G for o in kept[1:] if len(o.capped)])
+    apart = [
+        pose_difference(a, b)
+        for a, b in zip(kept_T_ref_lidar[1:], other_T_ref_lidar[1:], strict=True)
+    ]
     translation = max((t for t, _ in apart), default=0.0)
     rotation = max((r for _, r in apart), default=0.0)
     if len(difference) == 0:

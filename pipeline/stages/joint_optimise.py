@@ -10,7 +10,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.config import PipelineConfig
-from pipeline.metric import MetricError, SolutionComparison, compare_solutions, metric_error
+from pipeline.metric import (
+    MetricError,
+    SolutionComparison,
+    capped_distances,
+    compare_solutions,
+    metric_of,
+)
 from pipeline.optimisation import OptimisationResult, optimise
 from pipeline.stages.runner import IterationProgress, Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail
@@ -40,9 +46,12 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
             state, config, listeners, state.second_start, starts, done_before=result.iterations
         )
         objects = state.objects_in_lidar()
-        first, second = (
-            metric_error(objects, x.T_G_ref, x.T_ref_lidar, config.metric) for x in (result, other)
+        # Measured once per solution: eq. 12 chooses between them, the comparison reuses it.
+        first_distances, second_distances = (
+            capped_distances(objects, x.T_G_ref, x.T_ref_lidar, config.metric)
+            for x in (result, other)
         )
+        first, second = metric_of(first_distances), metric_of(second_distances)
         second_kept = second.value < first.value
         details.update(
             starts=2,
@@ -52,11 +61,16 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
             iterations_all_starts=result.iterations + other.iterations,
         )
         kept, dropped = (other, result) if second_kept else (result, other)
+        kept_distances, dropped_distances = (
+            (second_distances, first_distances)
+            if second_kept
+            else (first_distances, second_distances)
+        )
         comparison = compare_solutions(
-            objects,
-            (kept.T_G_ref, kept.T_ref_lidar),
-            (dropped.T_G_ref, dropped.T_ref_lidar),
-            config.metric,
+            kept_distances,
+            dropped_distances,
+            kept.T_ref_lidar,
+            dropped.T_ref_lidar,
             config.optimisation.uncertainty_block_m,
         )
         details.update(

@@ -1,7 +1,13 @@
 import numpy as np
 import pytest
 
-from pipeline.metric import MetricConfig, compare_solutions, metric_error
+from pipeline.metric import (
+    MetricConfig,
+    SolutionComparison,
+    capped_distances,
+    compare_solutions,
+    metric_error,
+)
 
 
 def _plane(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -37,10 +43,21 @@ def _two_planes(rng: np.random.Generator) -> list[list[np.ndarray]]:
     return [[big], [big[:4000] + rng.normal(0.0, 0.002, (4000, 3))]]
 
 
+Solution = tuple[np.ndarray, np.ndarray]
+
+
+def _compare(
+    objects: list[list[np.ndarray]], kept: Solution, other: Solution, block_m: float
+) -> SolutionComparison:
+    """`compare_solutions` as stage 4 calls it: each solution's distances measured once."""
+    ours, theirs = (capped_distances(objects, *x, MetricConfig()) for x in (kept, other))
+    return compare_solutions(ours, theirs, kept[1], other[1], block_m)
+
+
 def test_two_solutions_that_agree_are_not_apart_and_fit_alike() -> None:
     objects = _two_planes(np.random.default_rng(2))
     solution = (np.stack([np.eye(4)]), np.stack([np.eye(4), np.eye(4)]))
-    compared = compare_solutions(objects, solution, solution, MetricConfig(), block_m=0.5)
+    compared = _compare(objects, solution, solution, block_m=0.5)
     assert compared.apart_translation_m == 0.0 and compared.apart_rotation_deg == 0.0
     assert compared.difference_m == 0.0 and compared.separation_sigmas == 0.0
     assert compared.blocks >= 16
@@ -52,11 +69,11 @@ def test_a_solution_that_lifts_the_points_off_the_map_fits_worse_by_many_standar
     lifted = np.eye(4)
     lifted[2, 3] = 0.03
     other = (kept[0], np.stack([np.eye(4), lifted]))
-    compared = compare_solutions(objects, kept, other, MetricConfig(), block_m=0.5)
+    compared = _compare(objects, kept, other, block_m=0.5)
     assert compared.apart_translation_m == pytest.approx(0.03)
     assert compared.difference_m == pytest.approx(0.03, abs=0.003)
     assert compared.separation_sigmas > 10.0
-    swapped = compare_solutions(objects, other, kept, MetricConfig(), block_m=0.5)
+    swapped = _compare(objects, other, kept, block_m=0.5)
     assert swapped.separation_sigmas < -10.0
 
 
@@ -68,7 +85,5 @@ def test_one_block_of_points_cannot_tell_two_solutions_apart() -> None:
     kept = (np.stack([np.eye(4)]), np.stack([np.eye(4), np.eye(4)]))
     lifted = np.eye(4)
     lifted[2, 3] = 0.03
-    compared = compare_solutions(
-        objects, kept, (kept[0], np.stack([np.eye(4), lifted])), MetricConfig(), block_m=50.0
-    )
+    compared = _compare(objects, kept, (kept[0], np.stack([np.eye(4), lifted])), block_m=50.0)
     assert compared.blocks == 1 and np.isnan(compared.separation_sigmas)
