@@ -55,6 +55,16 @@ class ObservabilityConfig(BaseModel):
         "bias of all LiDARs is barely told from the baseline: it reports 31-40 mm there and "
         "fails runs 1.8-3.5 mm off; none: left out",
     )
+    surface_sensitivity_passes: int | None = Field(
+        default=None,
+        ge=2,
+        description="N: stage 4 is run again from its solution on object points projected N "
+        "times onto their local surfaces (`segmentation.surface_passes`) instead of "
+        "segmentation's once, and how far each pose moves is added to its reported covariance "
+        "as a systematic error: the smoothed surfaces' offset under range noise, which every "
+        "stop and every patch repeat and so no jackknife sees, is what the extra passes change "
+        "(`pipeline.stages.sensitivity`). None: left out",
+    )
     method: Literal["jackknife", "formal"] = Field(
         default="jackknife",
         description="jackknife: leave-one-stop-out spread (needs three stops or more, else "
@@ -218,13 +228,16 @@ def pose_uncertainties(
     T_base_ref: Matrix4,
     up_ref: NDArray[np.float64] | None,
     config: ObservabilityConfig,
+    surface_shift: NDArray[np.float64] | None = None,
 ) -> tuple[PoseUncertainty, ...]:
     """Per LiDAR (reference first), from stage 4's result.
 
     Formal: the information `J^T W J` rescaled by the a-posteriori variance factor, plus the weak
     prior, inverted. Reported: the jackknifes' covariances (`config.method`), never below the
     formal one, and with them (in quadrature) the effect of each LiDAR's estimated range bias
-    (`config.range_bias`). Each LiDAR's 6x6 block is turned from the optimiser's twist (in the
+    (`config.range_bias`) and the shift of the solution on surfaces smoothed further
+    (`surface_shift` (P,), the optimiser's twists; its outer product, a consider covariance).
+    Each LiDAR's 6x6 block is turned from the optimiser's twist (in the
     reference frame) into the level-base axes through the LiDAR's origin. `up_ref` (3,): the
     floor normal in the reference LiDAR's frame (None: use the base frame's axes as they are).
     The undetermined DoF are judged on the formal stddev.
@@ -248,6 +261,9 @@ def pose_uncertainties(
     systematic = (
         range_bias_covariance(result, prior, config) if config.range_bias == "estimated" else None
     )
+    if surface_shift is not None:
+        shifted = np.outer(surface_shift, surface_shift)
+        systematic = shifted if systematic is None else systematic + shifted
     R_level_base = np.eye(3) if up_ref is None else level_rotation(T_base_ref[:3, :3] @ up_ref)
     T_level_ref = make_transform(R_level_base, np.zeros(3)) @ T_base_ref
     limits = (

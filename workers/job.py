@@ -71,6 +71,7 @@ _STAGE_PROGRESS = {
     "global_alignment": 0.21,
     "optimisation": 0.22,
     "metric": 0.92,
+    "surface_sensitivity": 0.93,
     "observability": 0.94,
     "verdict": 0.96,
     "drift": 0.98,

@@ -37,12 +37,12 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     cannot tell them apart, the verdict says the data are ambiguous (`SolutionComparison`).
     Iterations are counted on over the two runs, so progress never goes back."""
     starts = 1 if state.second_start is None else 2
-    result = _optimise_from(state, config, listeners, (state.T_G_ref, state.T_ref_lidar), starts)
+    result = optimise_from(state, config, listeners, (state.T_G_ref, state.T_ref_lidar), starts)
     details: dict[str, Detail] = {}
     kept_metric: MetricError | None = None
     comparison: SolutionComparison | None = None
     if state.second_start is not None:
-        other = _optimise_from(
+        other = optimise_from(
             state, config, listeners, state.second_start, starts, done_before=result.iterations
         )
         objects = state.objects_in_lidar()
@@ -103,7 +103,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     return StageOutcome(new_state, details, message)
 
 
-def _optimise_from(
+def optimise_from(
     state: CalibrationState,
     config: PipelineConfig,
     listeners: Listeners,

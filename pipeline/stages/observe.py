@@ -50,6 +50,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         T_base_ref,
         None if floor_ref is None else floor_ref.normal,
         config.observability,
+        state.surface_shift,
     )
     return StageOutcome(
         dataclasses.replace(state, T_base_ref_calibrated=T_base_ref, uncertainties=uncertainties),

@@ -16,6 +16,7 @@ from pipeline.stages import (
     moving,
     observe,
     segment,
+    sensitivity,
 )
 from pipeline.stages.runner import Stage, stage_names
 
@@ -27,6 +28,7 @@ STAGE_SEQUENCE: tuple[Stage, ...] = (
     Stage("global_alignment", global_align.run),
     Stage("optimisation", joint_optimise.run),
     Stage("metric", measure.run),
+    Stage("surface_sensitivity", sensitivity.run),
     Stage("observability", observe.run),
     Stage("verdict", decide.run),
 )

@@ -147,6 +147,7 @@ CONFIG_METHODS = (
     "without_global_alignment",
     "surface_passes2",
     "surface_passes4",
+    "surface_sensitivity",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -186,6 +187,8 @@ def method_config(method: str) -> PipelineConfig:
         data["global_alignment"]["choose"] = "refined"
     elif method == "surface_debias":
         data["segmentation"]["surface_debias"] = "bootstrap"
+    elif method == "surface_sensitivity":
+        data["observability"]["surface_sensitivity_passes"] = 4
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method != "proposed":

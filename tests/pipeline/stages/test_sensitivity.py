@@ -1,0 +1,75 @@
+import numpy as np
+
+from pipeline.config import PipelineConfig
+from pipeline.geometry import exp_se3
+from pipeline.observability import ObservabilityConfig, pose_uncertainties
+from pipeline.optimisation import ParameterLayout
+from pipeline.stages import joint_optimise, sensitivity
+from pipeline.stages.runner import Listeners
+from pipeline.stages.state import CalibrationState
+from pipeline.transforms import from_xyz_rpy
+from tests.pipeline.stages.test_global_align import _after_stage_3
+
+
+def _optimised() -> CalibrationState:
+    return joint_optimise.run(_after_stage_3(), PipelineConfig(), Listeners()).state
+
+
+def test_twist_between_undoes_a_step_on_the_left() -> None:
+    T = from_xyz_rpy([0.4, -0.2, 0.9], np.radians([3.0, 30.0, -170.0]))
+    xi = np.array([0.003, -0.001, 0.002, 0.001, -0.002, 0.0005])
+    np.testing.assert_allclose(sensitivity.twist_between(T, exp_se3(xi) @ T), xi, atol=1e-12)
+
+
+def test_the_shift_vector_holds_each_moved_pose_in_its_own_columns() -> None:
+    layout = ParameterLayout(n_stops=3, n_lidars=2)
+    stops, lidars = np.stack([np.eye(4)] * 3), np.stack([np.eye(4)] * 2)
+    step = np.arange(1.0, 7.0) * 1e-3
+    moved_stops, moved_lidars = stops.copy(), lidars.copy()
+    moved_stops[2] = exp_se3(step) @ stops[2]
+    moved_lidars[1] = exp_se3(-step) @ lidars[1]
+    shift = sensitivity.shift_vector(layout, stops, lidars, moved_stops, moved_lidars)
+    expected = np.zeros(layout.size)
+    expected[layout.stop(2) : layout.stop(2) + 6] = step
+    expected[layout.lidar(1) : layout.lidar(1) + 6] = -step
+    np.testing.assert_allclose(shift, expected, atol=1e-12)
+
+
+def test_off_by_default_nothing_is_measured() -> None:
+    state = _after_stage_3()
+    outcome = sensitivity.run(state, PipelineConfig(), Listeners())
+    assert outcome.state is state and outcome.state.surface_shift is None
+    assert outcome.details == {"enabled": False}
+
+
+def test_on_it_measures_a_shift_that_only_widens_the_reported_stddev() -> None:
+    state = _optimised()
+    config = PipelineConfig(observability=ObservabilityConfig(surface_sensitivity_passes=4))
+    heard: list[tuple[int, int]] = []
+    outcome = sensitivity.run(state, config, Listeners(on_iteration=lambda *a: heard.append(a)))
+    shift = outcome.state.surface_shift
+    optimised = state.optimised
+    assert shift is not None and optimised is not None
+    assert shift.shape == (optimised.layout.size,) and np.all(np.isfinite(shift))
+    # The poses stay stage 4's; its re-run is not progress (no bar goes back).
+    np.testing.assert_array_equal(outcome.state.T_ref_lidar, state.T_ref_lidar)
+    assert heard == []
+    frame = state.lidars[1].frame
+    moved = outcome.details[f"shift_m:{frame}"]
+    assert isinstance(moved, float) and 0.0 < moved < 0.005  # clean boxes: a small shift
+    assert outcome.details["passes"] == 4
+    plain, wider = (
+        pose_uncertainties(optimised, state.T_base_ref_initial, None, config.observability, s)
+        for s in (None, shift)
+    )
+    for before, after in zip(plain[1:], wider[1:], strict=True):
+        assert np.all(after.stddev_translation_m >= before.stddev_translation_m)
+        assert np.all(after.stddev_rotation_deg >= before.stddev_rotation_deg)
+    # A pure translation of one LiDAR widens its 1-sigma by at least that length.
+    translation = np.zeros_like(shift)
+    col = optimised.layout.lidar(1)
+    translation[col : col + 3] = [0.004, 0.0, 0.0]
+    shifted = pose_uncertainties(
+        optimised, state.T_base_ref_initial, None, config.observability, translation
+    )
+    assert np.linalg.norm(shifted[1].stddev_translation_m) >= 0.004 - 1e-9
