@@ -69,8 +69,7 @@ class ObservabilityConfig(BaseModel):
         "moving 5.8 mm; 1098, 4.8 mm off), takes the RMS of error/sigma from 44.5 to 1.86 "
         "(translation), and doubles the seconds per recording; on sparse clouds the shift is "
         "mostly chance (set 1 with boxes at 5 % of the rate: 1.6 mm off, 5.7 mm reported), see "
-        "docs/method.md. "
-        "None: left out",
+        "docs/method.md. None: left out",
     )
     method: Literal["jackknife", "formal"] = Field(
         default="jackknife",

@@ -24,7 +24,7 @@ from pipeline.stages.joint_optimise import optimise_from
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.segment import segment_all
 from pipeline.stages.state import CalibrationState, Detail, required
-from pipeline.transforms import Matrix4, invert
+from pipeline.transforms import Matrix4, invert, pose_difference
 
 
 def twist_between(T_from: Matrix4, T_to: Matrix4) -> NDArray[np.float64]:
@@ -71,11 +71,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     details: dict[str, Detail] = {"enabled": True, "passes": passes, "iterations": moved.iterations}
     largest = 0.0
     for lidar in range(1, optimised.layout.n_lidars):
-        col = optimised.layout.lidar(lidar)
-        moved_m = float(
-            np.linalg.norm(moved.T_ref_lidar[lidar][:3, 3] - state.T_ref_lidar[lidar][:3, 3])
-        )
-        turned_deg = float(np.degrees(np.linalg.norm(shift[col + 3 : col + 6])))
+        moved_m, turned_deg = pose_difference(state.T_ref_lidar[lidar], moved.T_ref_lidar[lidar])
         frame = state.lidars[lidar].frame
         details[f"shift_m:{frame}"] = moved_m
         details[f"shift_deg:{frame}"] = turned_deg
