@@ -28,7 +28,8 @@ class OptimisationResult:
     points moved along their rays; `assembly.range_bias_terms`), from which the observability
     stage estimates each LiDAR's range bias and what it does to the poses (empty, 0 rows, unless
     `optimise(range_bias=True)`);
-    `variance_factor`: a-posteriori sum of weighted squared residuals over the redundancy.
+    `variance_factor`: a-posteriori sum of weighted squared residuals over the redundancy;
+    `kernel_scale_m`: the robust kernel's scale these terms were assembled with (the last step's).
     """
 
     T_G_ref: NDArray[np.float64]
@@ -51,3 +52,4 @@ class OptimisationResult:
     correspondences: tuple[int, ...]
     residual_rms_m: float
     seconds: float
+    kernel_scale_m: float

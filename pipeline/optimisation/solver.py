@@ -52,14 +52,7 @@ def optimise(
     """
     started = time.perf_counter()
     phases = _phases(objects, planes, floor_G, len(T_G_ref), config, normals)
-    lidars = np.array(T_ref_lidar, dtype=np.float64)
-    run = _Run(
-        stops=np.array(T_G_ref, dtype=np.float64),
-        lidars=lidars,
-        history=[lidars.copy()],
-        damping=config.initial_damping,
-        scale=config.kernel_scale_min_m,
-    )
+    run = _Run.start(T_G_ref, T_ref_lidar, config, config.kernel_scale_min_m)
     for phase, objective in enumerate(phases):
         _iterate(run, objective, config, last=phase == len(phases) - 1, on_iteration=on_iteration)
     return _result(phases[-1], run, started, range_bias)
@@ -72,10 +65,12 @@ def _phases(
     n_stops: int,
     config: OptimisationConfig,
     normals: Sequence[Sequence[Points]] | None,
+    *,
+    final_only: bool = False,
 ) -> list[JointObjective]:
     """The objective of each phase: a coarse one on `coarse_points_per_cloud` points when that is
     fewer than the final phase's, then the final one (normal gate `fine_max_normal_angle_deg`, loss
-    `fine_robust_loss`)."""
+    `fine_robust_loss`); `final_only`: the final one alone."""
     fine_config = config.model_copy(
         update={
             "max_normal_angle_deg": config.fine_max_normal_angle_deg,
@@ -84,14 +79,37 @@ def _phases(
     )
     phases = [JointObjective.build(objects, planes, floor_G, n_stops, fine_config, normals)]
     coarse_cap = config.coarse_points_per_cloud
-    if coarse_cap is not None and (
-        config.max_points_per_cloud is None or coarse_cap < config.max_points_per_cloud
+    if (
+        not final_only
+        and coarse_cap is not None
+        and (config.max_points_per_cloud is None or coarse_cap < config.max_points_per_cloud)
     ):
         coarse_config = config.model_copy(update={"max_points_per_cloud": coarse_cap})
         phases.insert(
             0, JointObjective.build(objects, planes, floor_G, n_stops, coarse_config, normals)
         )
     return phases
+
+
+def evaluate_at(
+    objects: Sequence[Sequence[Points]],
+    T_G_ref: NDArray[np.float64],
+    T_ref_lidar: NDArray[np.float64],
+    config: OptimisationConfig,
+    *,
+    kernel_scale_m: float,
+    planes: Sequence[Sequence[Plane | None]] | None = None,
+    floor_G: Plane | None = None,
+    normals: Sequence[Sequence[Points]] | None = None,
+) -> OptimisationResult:
+    """What `optimise` would return at these poses without moving them (no iterations): the
+    final phase's associations and normal equations there, the robust kernel at
+    `kernel_scale_m`. Given a solution's own `kernel_scale_m`, it compares other clouds (the same
+    scene segmented otherwise) with that solution's terms, term for term."""
+    started = time.perf_counter()
+    (objective,) = _phases(objects, planes, floor_G, len(T_G_ref), config, normals, final_only=True)
+    run = _Run.start(T_G_ref, T_ref_lidar, config, kernel_scale_m)
+    return _result(objective, run, started, range_bias=False)
 
 
 @dataclass
@@ -106,6 +124,24 @@ class _Run:
     errors: list[float] = field(default_factory=list)
     converged: bool = False
     iteration: int = 0
+
+    @classmethod
+    def start(
+        cls,
+        T_G_ref: NDArray[np.float64],
+        T_ref_lidar: NDArray[np.float64],
+        config: OptimisationConfig,
+        scale: float,
+    ) -> _Run:
+        """A run at these poses (copied), before any step."""
+        lidars = np.array(T_ref_lidar, dtype=np.float64)
+        return cls(
+            stops=np.array(T_G_ref, dtype=np.float64),
+            lidars=lidars,
+            history=[lidars.copy()],
+            damping=config.initial_damping,
+            scale=scale,
+        )
 
 
 def _iterate(
@@ -211,6 +247,7 @@ def _result(
         correspondences=tuple(int(c) for c in per_lidar),
         residual_rms_m=residual_rms,
         seconds=time.perf_counter() - started,
+        kernel_scale_m=run.scale,
     )
 
 

@@ -18,8 +18,9 @@ from pipeline.metric import (
     metric_of,
 )
 from pipeline.optimisation import OptimisationResult, optimise
+from pipeline.optimisation.solver import evaluate_at
 from pipeline.stages.runner import IterationProgress, Listeners, StageOutcome
-from pipeline.stages.state import CalibrationState, Detail
+from pipeline.stages.state import CalibrationState, Detail, required
 
 
 def _iteration_of(
@@ -129,4 +130,22 @@ def optimise_from(
         if on_iteration is None
         else partial(_iteration_of, on_iteration, done_before, max_iterations),
         range_bias=config.observability.range_bias == "estimated",
+    )
+
+
+def evaluate_solution(state: CalibrationState, config: PipelineConfig) -> OptimisationResult:
+    """Stage 4's terms on `state`'s clouds at `state`'s poses, the robust kernel where stage 4
+    left it (`optimisation.kernel_scale_m`), without a step: the same solution judged on clouds
+    segmented otherwise."""
+    rough = state.floor_refinement
+    optimised = required(state.optimised, "optimisation")
+    return evaluate_at(
+        state.objects_in_lidar(),
+        state.T_G_ref,
+        state.T_ref_lidar,
+        config.optimisation,
+        kernel_scale_m=optimised.kernel_scale_m,
+        planes=state.floors_seen() if rough is not None else None,
+        floor_G=rough.floor_G if rough is not None else None,
+        normals=state.object_normals_in_lidar(),
     )

@@ -19,8 +19,9 @@ from numpy.typing import NDArray
 
 from pipeline.config import PipelineConfig
 from pipeline.geometry import log_se3
+from pipeline.observability import SurfaceShift, shift_chance_covariance
 from pipeline.optimisation.layout import ParameterLayout
-from pipeline.stages.joint_optimise import optimise_from
+from pipeline.stages.joint_optimise import evaluate_solution, optimise_from
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.segment import segment_all
 from pipeline.stages.state import CalibrationState, Detail, required
@@ -55,7 +56,9 @@ def shift_vector(
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
     """Segment again with `surface_sensitivity_passes` projections, run stage 4 from its
     solution on those points (its iterations are not progress: no bar goes back) and keep the
-    shift of every pose; nothing when the config leaves it out."""
+    shift of every pose, with the spread chance alone would give it (the jackknife over stops
+    of the two objectives' difference at the solution); nothing when the config leaves it
+    out."""
     passes = config.observability.surface_sensitivity_passes
     if passes is None:
         return StageOutcome(state, {"enabled": False}, "not measured (off)")
@@ -68,6 +71,9 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     shift = shift_vector(
         optimised.layout, state.T_G_ref, state.T_ref_lidar, moved.T_G_ref, moved.T_ref_lidar
     )
+    chance = shift_chance_covariance(
+        optimised, evaluate_solution(resmoothed, config), config.observability
+    )
     details: dict[str, Detail] = {"enabled": True, "passes": passes, "iterations": moved.iterations}
     largest = 0.0
     for lidar in range(1, optimised.layout.n_lidars):
@@ -77,7 +83,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         details[f"shift_deg:{frame}"] = turned_deg
         largest = max(largest, moved_m)
     return StageOutcome(
-        dataclasses.replace(state, surface_shift=shift),
+        dataclasses.replace(state, surface_shift=SurfaceShift(shift, chance)),
         details,
         f"the solution moves up to {1e3 * largest:.1f} mm on surfaces smoothed {passes} times",
     )

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from pipeline.denoise import KeepMask
 from pipeline.geometry import Plane
 from pipeline.metric import MetricError, SolutionComparison
-from pipeline.observability import PoseUncertainty
+from pipeline.observability import PoseUncertainty, SurfaceShift
 from pipeline.optimisation import OptimisationResult
 from pipeline.problem import LidarInfo
 from pipeline.rough_refinement import RoughRefinementResult
@@ -97,9 +97,9 @@ class CalibrationState:
     judged after refinement), None when there is none. `metric_final` is the metric of the
     current poses: stage 4 leaves it where it chose between two starts by it (no stage after
     stage 4 moves the poses), the metric stage otherwise. `start_comparison`: stage 4's two
-    solutions side by side, None when it had one start. `surface_shift` (P,): how far stage 4's
-    solution moves on surfaces smoothed further, as the optimiser's twists (None: not measured,
-    `pipeline.stages.sensitivity`)."""
+    solutions side by side, None when it had one start. `surface_shift`: how far stage 4's
+    solution moves on surfaces smoothed further, and what chance alone would move it (None: not
+    measured, `pipeline.stages.sensitivity`)."""
 
     lidars: tuple[LidarInfo, ...]
     clouds_in_lidar: PerCloud[Points]
@@ -120,7 +120,7 @@ class CalibrationState:
     metric_initial: MetricError | None = None
     metric_final: MetricError | None = None
     start_comparison: SolutionComparison | None = None
-    surface_shift: NDArray[np.float64] | None = None
+    surface_shift: SurfaceShift | None = None
     T_base_ref_calibrated: Matrix4 | None = None
     uncertainties: tuple[PoseUncertainty, ...] | None = None
     calibrations: tuple[LidarCalibration, ...] | None = None

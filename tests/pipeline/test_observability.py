@@ -84,6 +84,7 @@ def test_the_jackknife_is_exact_leave_one_stop_out_on_a_linear_problem() -> None
         correspondences=(0, 0),
         residual_rms_m=0.0,
         seconds=0.0,
+        kernel_scale_m=0.015,
     )
     # The brute-force solutions keep the prior centred on the full solution, as the jackknife.
     left_out = []

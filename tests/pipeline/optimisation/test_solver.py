@@ -6,7 +6,7 @@ from pipeline.geometry import log_se3
 from pipeline.optimisation import OptimisationConfig, OptimisationResult, optimise
 from pipeline.optimisation.association import associate
 from pipeline.optimisation.objective import JointObjective
-from pipeline.optimisation.solver import kernel_scale_floor
+from pipeline.optimisation.solver import evaluate_at, kernel_scale_floor
 from pipeline.transforms import Points, invert, pose_difference
 from tests.pipeline.calibration_data import box_problem, true_T_ref_lidar
 from tests.pipeline.optimisation.inputs import StageInputs, stage_inputs
@@ -148,3 +148,30 @@ def test_the_kernel_never_gets_narrower_than_the_surfaces_scatter() -> None:
     # option, the fixed floor.
     assert floor(inputs.objects, config) < floor(noisy, config) - 0.005
     assert floor(noisy, OptimisationConfig()) == config.kernel_scale_min_m
+
+
+def test_evaluating_a_solution_where_it_ended_gives_its_own_terms() -> None:
+    inputs = stage_inputs()
+    result = _optimise(inputs)
+
+    def evaluated(objects: list[list[Points]]) -> OptimisationResult:
+        return evaluate_at(
+            objects,
+            result.T_G_ref,
+            result.T_ref_lidar,
+            OptimisationConfig(),
+            kernel_scale_m=result.kernel_scale_m,
+            planes=inputs.planes,
+            floor_G=inputs.rough.floor_G,
+            normals=inputs.normals,
+        )
+
+    again = evaluated(inputs.objects)
+    assert again.iterations == 0
+    np.testing.assert_array_equal(again.T_ref_lidar, result.T_ref_lidar)
+    np.testing.assert_allclose(again.information, result.information, rtol=1e-12)
+    np.testing.assert_allclose(again.stop_gradient, result.stop_gradient, rtol=1e-9, atol=1e-12)
+    # Other clouds at the same solution: other terms, the same kernel.
+    moved = evaluated(_lengthened(inputs.objects, 1, 0.005))
+    assert moved.kernel_scale_m == result.kernel_scale_m
+    assert np.linalg.norm(moved.gradient - result.gradient) > 0.0

@@ -2,7 +2,12 @@ import numpy as np
 
 from pipeline.config import PipelineConfig
 from pipeline.geometry import exp_se3
-from pipeline.observability import ObservabilityConfig, pose_uncertainties
+from pipeline.observability import (
+    ObservabilityConfig,
+    SurfaceShift,
+    pose_uncertainties,
+    shift_chance_covariance,
+)
 from pipeline.optimisation import ParameterLayout
 from pipeline.stages import joint_optimise, sensitivity
 from pipeline.stages.runner import Listeners
@@ -50,7 +55,8 @@ def test_on_it_measures_a_shift_that_only_widens_the_reported_stddev() -> None:
     shift = outcome.state.surface_shift
     optimised = state.optimised
     assert shift is not None and optimised is not None
-    assert shift.shape == (optimised.layout.size,) and np.all(np.isfinite(shift))
+    assert shift.shift.shape == (optimised.layout.size,) and np.all(np.isfinite(shift.shift))
+    assert shift.chance is not None and shift.chance.shape == (optimised.layout.size,) * 2
     # The poses stay stage 4's; its re-run is not progress (no bar goes back).
     np.testing.assert_array_equal(outcome.state.T_ref_lidar, state.T_ref_lidar)
     assert heard == []
@@ -65,11 +71,30 @@ def test_on_it_measures_a_shift_that_only_widens_the_reported_stddev() -> None:
     for before, after in zip(plain[1:], wider[1:], strict=True):
         assert np.all(after.stddev_translation_m >= before.stddev_translation_m)
         assert np.all(after.stddev_rotation_deg >= before.stddev_rotation_deg)
-    # A pure translation of one LiDAR widens its 1-sigma by at least that length.
-    translation = np.zeros_like(shift)
+    # A pure translation of one LiDAR that chance cannot give widens its 1-sigma by at least
+    # that length; one as large as its chance spread, not at all.
+    translation = np.zeros_like(shift.shift)
     col = optimised.layout.lidar(1)
     translation[col : col + 3] = [0.004, 0.0, 0.0]
-    shifted = pose_uncertainties(
-        optimised, state.T_base_ref_initial, None, config.observability, translation
+    chance = np.zeros((len(translation),) * 2)
+    chance[col : col + 6, col : col + 6] = np.diag([0.005**2] * 6)
+    shifted, by_chance = (
+        pose_uncertainties(
+            optimised,
+            state.T_base_ref_initial,
+            None,
+            config.observability,
+            SurfaceShift(translation, spread),
+        )
+        for spread in (None, chance)
     )
     assert np.linalg.norm(shifted[1].stddev_translation_m) >= 0.004 - 1e-9
+    np.testing.assert_allclose(by_chance[1].stddev_translation_m, plain[1].stddev_translation_m)
+
+
+def test_the_same_clouds_give_a_shift_no_spread() -> None:
+    optimised = _optimised().optimised
+    assert optimised is not None
+    chance = shift_chance_covariance(optimised, optimised, ObservabilityConfig())
+    assert chance is not None
+    np.testing.assert_array_equal(chance, np.zeros_like(chance))
