@@ -177,6 +177,13 @@ def _near_objects(
         return near
     centres = np.array([obj.T_world_object[:3, 3] for obj in compact])
     radius = np.array([obj.bounding_radius for obj in compact])
+    cones = rays_towards(centres, radius, origins, directions, footprint)
+    # The exact test on the rays in some object's cone only (rows `candidates`).
+    in_a_cone = np.zeros(len(directions), dtype=bool)
+    for cone in cones:
+        in_a_cone[cone] = True
+    candidates = np.flatnonzero(in_a_cone)
+    directions, origins = directions[candidates], origins[candidates]
     # Per ray and object: distance along the ray to the centre's foot, and |centre - origin|^2.
     along = directions @ centres.T - np.einsum("ij,ij->i", directions, origins)[:, None]
     to_centre_sq = (
@@ -184,11 +191,48 @@ def _near_objects(
         - 2.0 * origins @ centres.T
         + np.einsum("ij,ij->i", origins, origins)[:, None]
     )
-    reach_sphere = np.minimum(range_m + _MIN_GAP_M, np.finfo(np.float64).max)[:, None]
-    closest = np.clip(along, 0.0, reach_sphere)
-    distance_sq = to_centre_sq - 2.0 * closest * along + closest**2
-    limit = radius + closest * math.tan(footprint)
-    return np.asarray(near | np.any(distance_sq <= limit**2, axis=1))
+    reach_sphere = np.minimum(range_m[candidates] + _MIN_GAP_M, np.finfo(np.float64).max)
+    tan_footprint = math.tan(footprint)
+    for column, cone in enumerate(cones):
+        rows = np.searchsorted(candidates, cone)
+        closest = np.clip(along[rows, column], 0.0, reach_sphere[rows])
+        distance_sq = to_centre_sq[rows, column] - 2.0 * closest * along[rows, column] + closest**2
+        limit = radius[column] + closest * tan_footprint
+        near[cone] |= distance_sq <= limit**2
+    return near
+
+
+def rays_towards(
+    centres: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    origins: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    footprint: float,
+) -> list[NDArray[np.intp]]:
+    """Per sphere (`centres` (M, 3), `radius` (M,)), the rays that may pass within its radius
+    widened by the footprint: a superset, for the exact test on those alone (most rays of a
+    scan point nowhere near a given object). A ray from origin o_i passing within
+    `radius + t tan(footprint)` of the centre (t <= |centre - o_i|) passes, drawn from the
+    origins' mean instead, within `bound` = that plus the origins' spread, both at most
+    |centre - mean| + spread: inside a cone of half-angle asin(bound / distance) there.
+    `directions` (N, 3) are unit vectors; `origins` (N, 3) one per ray."""
+    if len(directions) == 0:
+        return [np.zeros(0, dtype=np.intp) for _ in centres]
+    mean = origins.mean(axis=0)
+    spread = float(np.max(np.linalg.norm(origins - mean, axis=1)))
+    offsets = centres - mean
+    distance = np.linalg.norm(offsets, axis=1)
+    # A margin far above rounding and far below any object keeps the superset a superset.
+    bound = radius + spread + (distance + spread) * math.tan(footprint) + 1e-6
+    every = np.arange(len(directions))
+    cones = []
+    for offset, d, b in zip(offsets, distance, bound, strict=True):
+        if d <= b:
+            cones.append(every)
+            continue
+        cos_limit = math.sqrt(1.0 - (b / d) ** 2)
+        cones.append(np.flatnonzero(directions @ (offset / d) >= cos_limit))
+    return cones
 
 
 def _straddle_boxes(
