@@ -161,78 +161,101 @@ def _near_objects(
     range_m: NDArray[np.float64],
     footprint: float,
 ) -> NDArray[np.bool_]:
-    """Rays whose footprint may touch an object's edge. For objects and walkers: the beam's path
-    up to just past its centre hit passes within the object's bounding sphere (widened by the
-    footprint's spread). For a room's walls and shelves, whose spheres would take in nearly every
-    ray: the footprint covers part of the box but not all of it. A ray that reaches the floor
-    before an object cannot straddle that object's edge."""
+    """Rays that hit something and whose footprint may touch an object's edge. For objects and
+    walkers: the beam's path up to just past its centre hit passes within the object's bounding
+    sphere (widened by the footprint's spread). For a room's walls and shelves, whose spheres
+    would take in nearly every ray: the footprint covers part of the box but not all of it. A
+    ray that reaches the floor before an object cannot straddle that object's edge. Each exact
+    test runs on the rays whose segment passes near the object (`segments_near`) only."""
     surfaces = scene.surfaces
     near = np.zeros(len(directions), dtype=bool)
+    hit = np.flatnonzero(np.isfinite(range_m))
+    origins, directions, range_m = origins[hit], directions[hit], range_m[hit]
+    tan_footprint = math.tan(footprint)
     reach = np.minimum(range_m + _MIN_GAP_M, _FAR_M)
     boxes = [obj for obj in surfaces if obj.role in _STRUCTURES]
     if boxes:
-        near = _straddle_boxes(boxes, origins, directions, reach, reach * math.tan(footprint))
+        near[hit] = _straddle_boxes(boxes, origins, directions, reach, reach * tan_footprint)
     compact = [obj for obj in surfaces if obj.role not in _STRUCTURES]
     if not compact:
         return near
     centres = np.array([obj.T_world_object[:3, 3] for obj in compact])
     radius = np.array([obj.bounding_radius for obj in compact])
-    cones = rays_towards(centres, radius, origins, directions, footprint)
-    # The exact test on the rays in some object's cone only (rows `candidates`).
-    in_a_cone = np.zeros(len(directions), dtype=bool)
-    for cone in cones:
-        in_a_cone[cone] = True
-    candidates = np.flatnonzero(in_a_cone)
-    directions, origins = directions[candidates], origins[candidates]
-    # Per ray and object: distance along the ray to the centre's foot, and |centre - origin|^2.
-    along = directions @ centres.T - np.einsum("ij,ij->i", directions, origins)[:, None]
-    to_centre_sq = (
-        np.sum(centres**2, axis=1)
-        - 2.0 * origins @ centres.T
-        + np.einsum("ij,ij->i", origins, origins)[:, None]
+    reach_sphere = range_m + _MIN_GAP_M
+    candidates = segments_near(
+        centres, radius, origins, directions, reach_sphere, reach_sphere * tan_footprint
     )
-    reach_sphere = np.minimum(range_m[candidates] + _MIN_GAP_M, np.finfo(np.float64).max)
-    tan_footprint = math.tan(footprint)
-    for column, cone in enumerate(cones):
-        rows = np.searchsorted(candidates, cone)
-        closest = np.clip(along[rows, column], 0.0, reach_sphere[rows])
-        distance_sq = to_centre_sq[rows, column] - 2.0 * closest * along[rows, column] + closest**2
+    # The exact test on the rows `rows` near some object only.
+    in_reach = np.zeros(len(hit), dtype=bool)
+    for rows_of_one in candidates:
+        in_reach[rows_of_one] = True
+    rows = np.flatnonzero(in_reach)
+    o, d = origins[rows], directions[rows]
+    # Per ray and object: distance along the ray to the centre's foot, and |centre - origin|^2.
+    along = d @ centres.T - np.einsum("ij,ij->i", d, o)[:, None]
+    to_centre_sq = (
+        np.sum(centres**2, axis=1) - 2.0 * o @ centres.T + np.einsum("ij,ij->i", o, o)[:, None]
+    )
+    for column, rows_of_one in enumerate(candidates):
+        at = np.searchsorted(rows, rows_of_one)
+        closest = np.clip(along[at, column], 0.0, reach_sphere[rows_of_one])
+        distance_sq = to_centre_sq[at, column] - 2.0 * closest * along[at, column] + closest**2
         limit = radius[column] + closest * tan_footprint
-        near[cone] |= distance_sq <= limit**2
+        near[hit[rows_of_one]] |= distance_sq <= limit**2
     return near
 
 
-def rays_towards(
+def _through_box(
+    o: NDArray[np.float64],
+    d: NDArray[np.float64],
+    half: NDArray[np.float64],
+    reach: NDArray[np.float64],
+    shrink_low: NDArray[np.float64],
+    shrink_high: NDArray[np.float64],
+) -> NDArray[np.bool_]:
+    """Whether each ray (origin `o`, direction `d` (n, 3), in the box's axes) passes, before
+    `reach` (n,), through the box of half-sizes `half` (3,) with each face moved inwards by
+    `shrink_low` / `shrink_high` (n, 3; negative grows it): the slab test."""
+    t_in = np.zeros(len(o))
+    t_out = reach.copy()
+    solid = np.ones(len(o), dtype=bool)
+    for axis in range(3):
+        low = -half[axis] + shrink_low[:, axis]
+        high = half[axis] - shrink_high[:, axis]
+        t1 = (low - o[:, axis]) / d[:, axis]
+        t2 = (high - o[:, axis]) / d[:, axis]
+        t_in = np.maximum(t_in, np.minimum(t1, t2))
+        t_out = np.minimum(t_out, np.maximum(t1, t2))
+        solid &= low < high
+    return np.asarray(solid & (t_in <= t_out))
+
+
+def segments_near(
     centres: NDArray[np.float64],
     radius: NDArray[np.float64],
     origins: NDArray[np.float64],
     directions: NDArray[np.float64],
-    footprint: float,
+    reach: NDArray[np.float64],
+    widen: NDArray[np.float64],
 ) -> list[NDArray[np.intp]]:
-    """Per sphere (`centres` (M, 3), `radius` (M,)), the rays that may pass within its radius
-    widened by the footprint: a superset, for the exact test on those alone (most rays of a
-    scan point nowhere near a given object). A ray from origin o_i passing within
-    `radius + t tan(footprint)` of the centre (t <= |centre - o_i|) passes, drawn from the
-    origins' mean instead, within `bound` = that plus the origins' spread, both at most
-    |centre - mean| + spread: inside a cone of half-angle asin(bound / distance) there.
-    `directions` (N, 3) are unit vectors; `origins` (N, 3) one per ray."""
+    """Per sphere (`centres` (M, 3), `radius` (M,)), the rays whose segment up to `reach` (N,)
+    may pass within its radius plus `widen` (N,) of its centre: a superset, for an exact test
+    on those alone. Drawn from the origins' mean, each segment moves by at most the origins'
+    spread, which widens the test by as much. `directions` (N, 3) are unit vectors."""
     if len(directions) == 0:
         return [np.zeros(0, dtype=np.intp) for _ in centres]
     mean = origins.mean(axis=0)
     spread = float(np.max(np.linalg.norm(origins - mean, axis=1)))
-    offsets = centres - mean
-    distance = np.linalg.norm(offsets, axis=1)
     # A margin far above rounding and far below any object keeps the superset a superset.
-    bound = radius + spread + (distance + spread) * math.tan(footprint) + 1e-6
-    every = np.arange(len(directions))
-    cones = []
-    for offset, d, b in zip(offsets, distance, bound, strict=True):
-        if d <= b:
-            cones.append(every)
-            continue
-        cos_limit = math.sqrt(1.0 - (b / d) ** 2)
-        cones.append(np.flatnonzero(directions @ (offset / d) >= cos_limit))
-    return cones
+    slack = widen + spread + 1e-6
+    found = []
+    for centre, r in zip(centres, radius, strict=True):
+        offset = centre - mean
+        along = directions @ offset
+        closest = np.clip(along, 0.0, reach)
+        gap_sq = offset @ offset - 2.0 * closest * along + closest**2
+        found.append(np.flatnonzero(gap_sq <= (r + slack) ** 2))
+    return found
 
 
 def _straddle_boxes(
@@ -245,41 +268,32 @@ def _straddle_boxes(
     """Rays (N,) whose cylinder of radius `spread` (N,), up to `reach` (N,), meets one of the
     boxes but is not wholly inside it: the ray passes through the box grown by `spread` and
     not through the box shrunk by it (its foot shrunk by `SINK_M` more, where it stands in an
-    uneven floor). The cylinder holds every sub-ray of the footprint up to `reach`."""
+    uneven floor). The cylinder holds every sub-ray of the footprint up to `reach`. Tested
+    exactly on the rays `segments_near` each box only."""
     R = np.array([box.T_world_object[:3, :3] for box in boxes])  # (B, 3, 3)
     centres = np.array([box.T_world_object[:3, 3] for box in boxes])
     half = 0.5 * np.array(
         [[b.dimensions["x"], b.dimensions["y"], b.dimensions["z"]] for b in boxes]
     )
-    # Rays in each box's frame, (N, B, 3); per axis below, so every reduction is elementwise.
-    stacked = R.transpose(1, 0, 2).reshape(3, -1)  # p @ stacked: p in every box's axes
-    n, b = len(origins), len(boxes)
-    o = (origins @ stacked).reshape(n, b, 3) - np.einsum("bj,bjk->bk", centres, R)[None]
-    d = (directions @ stacked).reshape(n, b, 3)
-    d = np.where(np.abs(d) < 1e-12, 1e-12, d)
-    grow = spread[:, None]
-    reach_b = reach[:, None]
-
-    def passes(
-        shrink_low: NDArray[np.float64], shrink_high: NDArray[np.float64]
-    ) -> NDArray[np.bool_]:
-        t_in = np.zeros(o.shape[:2])
-        t_out = np.broadcast_to(reach_b, o.shape[:2]).copy()
-        solid = np.ones(o.shape[:2], dtype=bool)
-        for axis in range(3):
-            low = -half[None, :, axis] + shrink_low[..., axis]
-            high = half[None, :, axis] - shrink_high[..., axis]
-            t1 = (low - o[..., axis]) / d[..., axis]
-            t2 = (high - o[..., axis]) / d[..., axis]
-            t_in = np.maximum(t_in, np.minimum(t1, t2))
-            t_out = np.minimum(t_out, np.maximum(t1, t2))
-            solid &= low < high
-        return np.asarray(solid & (t_in <= t_out))
-
-    grown = np.broadcast_to(-grow[..., None], (*o.shape[:2], 3))
-    shrunk = np.broadcast_to(grow[..., None], (*o.shape[:2], 3))
-    foot = shrunk + np.array([0.0, 0.0, SINK_M])
-    return np.asarray(np.any(passes(grown, grown) & ~passes(foot, shrunk), axis=1))
+    shift = np.einsum("bj,bjk->bk", centres, R)  # each box's centre in its own axes
+    straddle = np.zeros(len(origins), dtype=bool)
+    near = segments_near(
+        centres, np.linalg.norm(half, axis=1), origins, directions, reach, math.sqrt(3.0) * spread
+    )
+    for box, rows in enumerate(near):
+        if len(rows) == 0:
+            continue
+        # The ray in the box's axes, one axis per column.
+        o = origins[rows] @ R[box] - shift[box]
+        d = directions[rows] @ R[box]
+        d = np.where(np.abs(d) < 1e-12, 1e-12, d)
+        grow = spread[rows, None]
+        grown = np.broadcast_to(-grow, (len(rows), 3))
+        shrunk = np.broadcast_to(grow, (len(rows), 3))
+        foot = shrunk + np.array([0.0, 0.0, SINK_M])
+        inside = _through_box(o, d, half[box], reach[rows], grown, grown)
+        straddle[rows] |= inside & ~_through_box(o, d, half[box], reach[rows], foot, shrunk)
+    return straddle
 
 
 def _footprint_rays(directions: NDArray[np.float64], footprint: float) -> NDArray[np.float64]:

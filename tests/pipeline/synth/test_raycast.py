@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from pipeline.synth.raycast import cast, cast_with_footprint, rays_towards
+from pipeline.synth.raycast import cast, cast_with_footprint, segments_near
 from pipeline.synth.scene import ObjectKind, Scene, SceneObject, SceneSpec, build_scene
 from pipeline.transforms import from_xyz_rpy
 
@@ -155,9 +155,9 @@ def test_no_footprint_means_no_bleeding() -> None:
     assert not returns.is_bleeding.any()
 
 
-def test_the_cones_hold_every_ray_that_passes_near_a_sphere() -> None:
-    # The cull before the exact test must keep every ray the exact test passes: rays from
-    # origins spread over a few centimetres, spheres near and far, a wide footprint.
+def test_the_segments_near_a_sphere_hold_every_one_the_exact_test_passes() -> None:
+    # The cull before each exact test must keep every ray that test passes: rays from origins
+    # spread over a few centimetres, spheres near and far, a wide footprint, short and long rays.
     rng = np.random.default_rng(3)
     n, footprint = 20_000, math.radians(1.5)
     origins = np.array([0.0, 0.0, 0.9]) + rng.normal(0.0, 0.02, (n, 3))
@@ -166,8 +166,10 @@ def test_the_cones_hold_every_ray_that_passes_near_a_sphere() -> None:
     centres = np.vstack([rng.uniform(-4.0, 4.0, (12, 3)), [[0.05, 0.0, 0.9]]])
     radius = rng.uniform(0.05, 0.6, len(centres))
     reach = rng.uniform(0.5, 8.0, n)
-    cones = rays_towards(centres, radius, origins, directions, footprint)
-    for column, (centre, r) in enumerate(zip(centres, radius, strict=True)):
+    candidates = segments_near(
+        centres, radius, origins, directions, reach, reach * math.tan(footprint)
+    )
+    for rows, centre, r in zip(candidates, centres, radius, strict=True):
         # The exact test, ray by ray: the nearest point of the ray (up to its reach) to the
         # centre, within the radius widened by the footprint there.
         along = np.einsum("ij,ij->i", directions, centre - origins)
@@ -175,6 +177,6 @@ def test_the_cones_hold_every_ray_that_passes_near_a_sphere() -> None:
         gap = np.linalg.norm(origins + closest[:, None] * directions - centre, axis=1)
         near = np.flatnonzero(gap <= r + closest * math.tan(footprint))
         assert len(near) > 0
-        assert np.isin(near, cones[column]).all()
-    # ... and leaves most rays out (the point of it) when the sphere is far.
-    assert min(len(cone) for cone in cones) < n / 10
+        assert np.isin(near, rows).all()
+    # ... and leaves most rays out (the point of it) for a sphere away from the origins.
+    assert min(len(rows) for rows in candidates) < n / 10
