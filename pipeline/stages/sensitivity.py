@@ -6,7 +6,8 @@ and every stop and every patch of a surface repeats that offset, so the jackknif
 what it does to the poses (bench_random seed 1060: 10.1 mm off with a jackknife 1-sigma of
 0.3 mm). Projecting the points onto their surfaces again thins the noisy sheet and moves that
 offset: the solution's shift measures how much the calibration rests on it, and the
-observability stage adds it to the reported covariance as a systematic error. The poses
+observability stage adds it to the reported 1-sigma as a systematic error, less the spread that
+chance alone would give it (a jackknife over stops of the linearised shift). The poses
 themselves stay those of stage 4.
 """
 
