@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from functools import partial
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -114,7 +115,6 @@ def optimise_from(
 ) -> OptimisationResult:
     """Stage 4 from `start` (`T_G_ref`, `T_ref_lidar`), one of `starts` runs; its iterations are
     reported after the `done_before` of the runs before it, out of `starts` times the limit."""
-    rough = state.floor_refinement
     on_iteration = listeners.on_iteration
     T_G_ref, T_ref_lidar = start
     max_iterations = starts * config.optimisation.max_iterations
@@ -123,9 +123,7 @@ def optimise_from(
         T_G_ref,
         T_ref_lidar,
         config.optimisation,
-        planes=state.floors_seen() if rough is not None else None,
-        floor_G=rough.floor_G if rough is not None else None,
-        normals=state.object_normals_in_lidar(),
+        **_floors_and_normals(state),
         on_iteration=None
         if on_iteration is None
         else partial(_iteration_of, on_iteration, done_before, max_iterations),
@@ -137,7 +135,6 @@ def evaluate_solution(state: CalibrationState, config: PipelineConfig) -> Optimi
     """Stage 4's terms on `state`'s clouds at `state`'s poses, the robust kernel where stage 4
     left it (`optimisation.kernel_scale_m`), without a step: the same solution judged on clouds
     segmented otherwise."""
-    rough = state.floor_refinement
     optimised = required(state.optimised, "optimisation")
     return evaluate_at(
         state.objects_in_lidar(),
@@ -145,7 +142,16 @@ def evaluate_solution(state: CalibrationState, config: PipelineConfig) -> Optimi
         state.T_ref_lidar,
         config.optimisation,
         kernel_scale_m=optimised.kernel_scale_m,
-        planes=state.floors_seen() if rough is not None else None,
-        floor_G=rough.floor_G if rough is not None else None,
-        normals=state.object_normals_in_lidar(),
+        **_floors_and_normals(state),
     )
+
+
+def _floors_and_normals(state: CalibrationState) -> dict[str, Any]:
+    """What stage 4's objective takes besides the object points: the floor planes seen and the
+    floor in G (stage 3's; none when it did not run) and the object points' normals."""
+    rough = state.floor_refinement
+    return {
+        "planes": state.floors_seen() if rough is not None else None,
+        "floor_G": rough.floor_G if rough is not None else None,
+        "normals": state.object_normals_in_lidar(),
+    }
