@@ -1,7 +1,8 @@
 """Association: each source point's nearest neighbour in a target map (kd-tree), gated by
 distance and by the way the two surfaces face.
 
-Cross pairs: points of the other LiDARs against the reference LiDAR's map (eq. 11 of the paper).
+Cross pairs: points of the other LiDARs against the reference LiDAR's map (eq. 11 of the paper),
+and with `cross_pairs: every_lidar` every LiDAR's points against every other LiDAR's map too.
 Self pairs: a LiDAR's points against its own map as seen from another stop (self-consistency).
 """
 
@@ -26,23 +27,27 @@ class Pairs:
 
 
 def associate(objective: JointObjective, placed: PlacedClouds) -> Pairs:
-    """The pairs of every source point with a target point within `max_correspondence_m`."""
+    """The pairs of every source point with a target point within `max_correspondence_m`;
+    eq. 11 (`cross_error`) over the pairs with the reference's map alone."""
     empty = np.zeros(0, dtype=np.int64)
     if len(objective.reference.points) == 0 or len(objective.sources.points) == 0:
         return Pairs(empty, empty, float("nan"))
     sources, targets = [], []
     cross_error = float("nan")
+    every_lidar = objective.config.cross_pairs == "every_lidar"
     for lidar in range(objective.layout.n_lidars):
         rows = np.flatnonzero(objective.reference.lidar == lidar)
         if len(rows) == 0:
             continue
         tree = KDTree(placed.reference_G[rows])
-        if lidar == 0:
-            cross = np.flatnonzero(objective.sources.lidar > 0)
+        if lidar == 0 or every_lidar:
+            cross = np.flatnonzero(objective.sources.lidar != lidar)
             if len(cross):
-                source, target, cross_error = _cross_pairs(objective, placed, tree, rows, cross)
+                source, target, error = _cross_pairs(objective, placed, tree, rows, cross)
                 sources.append(source)
                 targets.append(target)
+                if lidar == 0:
+                    cross_error = error
         own = np.flatnonzero(objective.sources.lidar == lidar)
         if len(own) == 0:
             continue
@@ -63,8 +68,9 @@ def _cross_pairs(
     rows: NDArray[np.int64],
     cross: NDArray[np.int64],
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], float]:
-    """Source rows `cross` paired with their nearest point of the reference map (`tree` over its
-    target `rows`), and eq. 11 over all of them (before any gate)."""
+    """Source rows `cross` paired with their nearest point of one LiDAR's map (`tree` over its
+    target `rows`), and the mean distance over all of them before any gate (eq. 11 when that
+    map is the reference's)."""
     distance, index = tree.query(placed.source_G[cross], k=1)
     cross_error = float(np.mean(distance))
     nearest = rows[index.astype(np.int64)]

@@ -83,6 +83,14 @@ class OptimisationConfig(BaseModel):
         description="every LiDAR's object map kept self-consistent across stops, not only the "
         "reference's: more constraints on the stop poses",
     )
+    cross_pairs: Literal["reference", "every_lidar"] = Field(
+        default="reference",
+        description="reference: the other LiDARs' points pair with the reference LiDAR's map "
+        "(eq. 11); every_lidar: every LiDAR's points also pair with every other LiDAR's map, "
+        "the reference's included, and each LiDAR's map is kept self-consistent "
+        "(lidar_self_consistency): LiDARs that overlap each other more than the reference tie "
+        "each other directly",
+    )
     floor_terms: bool = True
     floor_normal_sigma_deg: float = Field(default=0.02, gt=0)
     floor_offset_sigma_m: float = Field(default=0.001, gt=0)

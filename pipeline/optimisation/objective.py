@@ -75,8 +75,9 @@ class PlacedClouds:
 class JointObjective:
     """The data of the joint optimisation's cost: source clouds (matched to a target map),
     target clouds (the reference LiDAR's map, and every LiDAR's own under
-    `lidar_self_consistency`), their surface normals, and the floor observations held against
-    `floor_G` (empty without floor terms). `source_starts`: first row of each source slice."""
+    `lidar_self_consistency` or `cross_pairs: every_lidar`), their surface normals, and the
+    floor observations held against `floor_G` (empty without floor terms). `source_starts`:
+    first row of each source slice."""
 
     config: OptimisationConfig
     layout: ParameterLayout
@@ -100,10 +101,12 @@ class JointObjective:
         """The objective over `objects[lidar][stop]` (see `optimise` for the arguments)."""
         parts, kept = _sampled(objects, config)
         parts, part_normals = _with_normals(parts, kept, normals, config)
-        # Targets: the reference LiDAR's map, and every LiDAR's own when it is kept consistent.
-        is_target = [p[0] == 0 or config.lidar_self_consistency for p in parts]
+        # Targets: the reference LiDAR's map, and every LiDAR's own when it is kept consistent or
+        # paired with the others'.
+        every_lidar = config.cross_pairs == "every_lidar"
+        is_target = [p[0] == 0 or config.lidar_self_consistency or every_lidar for p in parts]
         reference, reference_normals = _stacked(parts, part_normals, is_target)
-        used = [p[0] > 0 or config.reference_self_consistency for p in parts]
+        used = [p[0] > 0 or config.reference_self_consistency or every_lidar for p in parts]
         sources, source_normals = _stacked(parts, part_normals, used)
         floor: tuple[PlaneObservation, ...] = ()
         if planes is not None and floor_G is not None and config.floor_terms:

@@ -139,6 +139,7 @@ CONFIG_METHODS = (
     "surface_k30",
     "beam_fit",
     "fine_cauchy",
+    "every_lidar",
     "global_alignment",
     "kernel_30mm",
     "kernel_sigmas",
@@ -191,6 +192,8 @@ def method_config(method: str) -> PipelineConfig:
         data["observability"]["surface_sensitivity_passes"] = 4
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
+    elif method == "every_lidar":
+        data["optimisation"]["cross_pairs"] = "every_lidar"
     elif method != "proposed":
         raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
     return config_from_mapping(data)

@@ -59,3 +59,27 @@ def test_the_back_of_a_wall_is_not_its_front(gate_deg: float | None, paired: boo
     built, lidars = objective(2.0, max_normal_angle_deg=gate_deg)
     pairs = associate(built, built.place(np.stack([np.eye(4)] * 2), lidars))
     assert np.any(built.sources.lidar[pairs.source] == 1) == paired
+
+
+def test_every_lidar_pairs_each_lidars_points_with_every_other_lidars_map() -> None:
+    built, lidars = objective(0.0, cross_pairs="every_lidar")
+    pairs = associate(built, built.place(np.stack([np.eye(4)] * 2), lidars))
+    source = built.sources.lidar[pairs.source]
+    target = built.reference.lidar[pairs.target]
+    # The reference's points of both stops meet LiDAR 1's map (one stop) as well as their own
+    # map of the other stop; LiDAR 1 saw one stop, so it has no self pair.
+    assert np.count_nonzero((source == 0) & (target == 1)) == 2 * len(GRID)
+    assert np.count_nonzero((source == 0) & (target == 0)) == 2 * len(GRID)
+    assert np.count_nonzero((source == 1) & (target == 0)) == len(GRID)
+    assert not np.any((source == 1) & (target == 1))
+
+
+def test_eq_11_stays_the_reference_maps_alone_with_every_lidar() -> None:
+    placed_error = []
+    for cross_pairs in ("reference", "every_lidar"):
+        built, lidars = objective(0.0, cross_pairs=cross_pairs, max_correspondence_m=0.05)
+        lidars[1] = make_transform(np.eye(3), [0.3, 0.0, 0.0])
+        pairs = associate(built, built.place(np.stack([np.eye(4)] * 2), lidars))
+        placed_error.append(pairs.cross_error)
+    assert placed_error[1] == pytest.approx(placed_error[0])
+    assert placed_error[0] == pytest.approx(0.3, abs=0.01)
