@@ -4,13 +4,15 @@ floor terms when stage 3 gave a floor (`pipeline.optimisation`)."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from functools import partial
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.config import PipelineConfig
+from pipeline.geometry import Plane
 from pipeline.metric import (
     MetricError,
     SolutionComparison,
@@ -22,6 +24,7 @@ from pipeline.optimisation import OptimisationResult, optimise
 from pipeline.optimisation.solver import evaluate_at
 from pipeline.stages.runner import IterationProgress, Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail, required
+from pipeline.transforms import Points
 
 
 def _iteration_of(
@@ -146,7 +149,13 @@ def evaluate_solution(state: CalibrationState, config: PipelineConfig) -> Optimi
     )
 
 
-def _floors_and_normals(state: CalibrationState) -> dict[str, Any]:
+class _FloorsAndNormals(TypedDict):
+    planes: Sequence[Sequence[Plane | None]] | None
+    floor_G: Plane | None
+    normals: Sequence[Sequence[Points]]
+
+
+def _floors_and_normals(state: CalibrationState) -> _FloorsAndNormals:
     """What stage 4's objective takes besides the object points: the floor planes seen and the
     floor in G (stage 3's; none when it did not run) and the object points' normals."""
     rough = state.floor_refinement
