@@ -44,8 +44,11 @@ class CalibrationResult:
 
     `lidars` has the reference first, then the others in sorted order. `T_odom_base` (J, 4, 4):
     the refined stop poses of the base in the odometry frame. `error_per_iteration`: eq. 11 of
-    stage 4 per iteration (metres). `warnings`: what the user should fix or know, the recording's
-    (`recording.warnings`) and the config's settings that name LiDAR frames it does not have.
+    stage 4 per iteration (metres). `object_distances_final_m`: per LiDAR (reference first,
+    empty), each object point's distance to the reference's map after calibration, capped as
+    eq. 12 caps it (what `metric_error_final` averages). `warnings`: what the user should fix or
+    know, the recording's (`recording.warnings`) and the config's settings that name LiDAR frames
+    it does not have.
     """
 
     reference_frame: str
@@ -64,6 +67,7 @@ class CalibrationResult:
     pipeline_version: str
     optimisation: OptimisationResult
     rough_refinement: RoughRefinementResult | None
+    object_distances_final_m: tuple[NDArray[np.float64], ...] = ()
     warnings: tuple[str, ...] = ()
 
     @property
@@ -134,6 +138,7 @@ def _result(
         lidars=required(state.calibrations, "verdict"),
         metric_error_initial=required(state.metric_initial, "metric").value,
         metric_error_final=required(state.metric_final, "metric").value,
+        object_distances_final_m=required(state.metric_final, "metric").capped,
         verdict=required(state.verdict, "verdict"),
         stages=stages,
         converged=optimised.converged,

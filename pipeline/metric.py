@@ -42,11 +42,13 @@ class MetricConfig(BaseModel):
 class MetricError:
     """`value`: eq. 12 in metres (NaN when there is nothing to compare). `per_lidar[i]`: the
     same mean over LiDAR i's points alone (NaN for the reference and for LiDARs without
-    objects); `points[i]`: how many points of LiDAR i entered."""
+    objects); `points[i]`: how many points of LiDAR i entered; `capped[i]`: their capped
+    distances, what the means average (empty for the reference)."""
 
     value: float
     per_lidar: tuple[float, ...]
     points: tuple[int, ...]
+    capped: tuple[NDArray[np.float64], ...] = ()
 
 
 def place(
@@ -84,7 +86,12 @@ def metric_of(distances: Sequence[CappedDistances]) -> MetricError:
     counts = [len(d.points_G) for d in distances]
     every = np.concatenate([np.zeros(0)] + [d.capped for d in distances[1:]])
     value = float(np.mean(every)) if len(every) else float("nan")
-    return MetricError(value=value, per_lidar=tuple(per_lidar), points=tuple(counts))
+    return MetricError(
+        value=value,
+        per_lidar=tuple(per_lidar),
+        points=tuple(counts),
+        capped=tuple(d.capped for d in distances),
+    )
 
 
 @dataclass(frozen=True)

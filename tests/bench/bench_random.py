@@ -91,6 +91,12 @@ class SeedResult:
     """Eq. 12 after calibration (what the verdict's `metric_error` check judged)."""
     failed_checks: list[str] = field(default_factory=list)
     """The names of the verdict's failed checks (why a failed verdict failed)."""
+    checks: list[dict[str, object]] = field(default_factory=list)
+    """Every check of the verdict: name, value, limit, passed (a verdict rule can be judged
+    again from these without calibrating again)."""
+    distance_histograms: list[list[int]] = field(default_factory=list)
+    """Per non-reference LiDAR, its object points' distances to the reference's map after
+    calibration in 1 mm bins, the last bin those at eq. 12's cap (`distance_histogram`)."""
 
     @property
     def max_translation(self) -> float:
@@ -204,6 +210,14 @@ def run_seed(
             record.passed = bool(result.passed)
             record.metric_error_m = result.metric_error_final
             record.failed_checks = [check.name for check in result.verdict.failed]
+            record.checks = [
+                {"name": c.name, "value": c.value, "limit": c.limit, "passed": c.passed}
+                for c in result.verdict.checks
+            ]
+            record.distance_histograms = [
+                distance_histogram(d, config.metric.max_distance_m)
+                for d in result.object_distances_final_m[1:]
+            ]
         record.seconds = time.perf_counter() - started
         path.parent.mkdir(parents=True, exist_ok=True)
         partial = path.with_suffix(".partial")
@@ -213,6 +227,14 @@ def run_seed(
     if discard_recording and directory.exists():
         shutil.rmtree(directory)
     return results
+
+
+def distance_histogram(capped: NDArray[np.float64], cap_m: float) -> list[int]:
+    """Counts of `capped` distances (m) in 1 mm bins below `cap_m`, then one bin of those at the
+    cap."""
+    bins = round(cap_m * 1000)
+    index = np.minimum(np.floor(np.asarray(capped) * 1000).astype(np.int64), bins)
+    return [int(c) for c in np.bincount(index, minlength=bins + 1)]
 
 
 def describe(record: SeedResult) -> str:
