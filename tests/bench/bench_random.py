@@ -3,6 +3,7 @@
     .venv/bin/python -m tests.bench.bench_random [--seeds 1000-1099] [--jobs 2]
         [--rate-scale 1.0] [--cache /tmp/fleetcal-bench-random] [--methods proposed ...]
         [--worlds open,room,people,uneven-floor,dust,factory,random]
+        [--without-checks metric_error,...]
 
 For each seed the recording is synthesised once into `CACHE/recordings/rate-F/seed-N` (a
 recording left half-written is written again), then read from disk with `pipeline.io` and
@@ -17,6 +18,11 @@ The tables then gain the world in the class and a table per world, and a paired 
 world against `open` on the same seeds ("with walls against without"): the differences of the
 recordings' errors (world - open), and how many recordings each came out better in. Without
 `--worlds` the run is the open floor exactly as before the world axis.
+
+Each result keeps every check of its verdict (name, value, limit, outcome) and, per
+non-reference LiDAR, its object points' distances to the reference's map as a 1 mm histogram
+(`distance_histogram`). `--without-checks KINDS` judges the cached verdicts again without those
+kinds of check (`without_checks`): what a verdict without them would have said, in seconds.
 
 The error of a recording is, over its non-reference LiDARs, the largest error of the calibrated
 `T_ref_lidar` against the truth (as `bench_calibration` measures it). Success: within 5 mm and
@@ -40,9 +46,9 @@ import shutil  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
-from collections.abc import Callable, Iterable, Sequence  # noqa: E402
+from collections.abc import Callable, Collection, Iterable, Sequence  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
-from dataclasses import asdict, dataclass, field  # noqa: E402
+from dataclasses import asdict, dataclass, field, replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -235,6 +241,25 @@ def distance_histogram(capped: NDArray[np.float64], cap_m: float) -> list[int]:
     bins = round(cap_m * 1000)
     index = np.minimum(np.floor(np.asarray(capped) * 1000).astype(np.int64), bins)
     return [int(c) for c in np.bincount(index, minlength=bins + 1)]
+
+
+def without_checks(record: SeedResult, kinds: Collection[str]) -> SeedResult:
+    """`record` judged again as if the verdict had no checks of these kinds (a check's kind is
+    its name before `:`, e.g. `metric_error`, `overlap`): passed when every other check passed.
+    A refusal stays one; a result cached before the checks were kept cannot be judged again."""
+    if record.refused is not None or not kinds:
+        return record
+    if not record.checks:
+        raise SystemExit(
+            f"seed {record.seed} ({record.method}): its cached result keeps no checks; delete "
+            "it (or use a new --cache) to calibrate it again before judging without checks"
+        )
+    kept = [c for c in record.checks if str(c["name"]).split(":")[0] not in kinds]
+    return replace(
+        record,
+        passed=all(bool(c["passed"]) for c in kept),
+        failed_checks=[str(c["name"]) for c in kept if not c["passed"]],
+    )
 
 
 def describe(record: SeedResult) -> str:
@@ -489,8 +514,16 @@ def main(argv: Sequence[str] | None = None) -> None:
         help="delete each seed's recording once all its methods have results (a full-rate "
         "recording takes about 0.4 GB; the results stay cached, a later method synthesises again)",
     )
+    parser.add_argument(
+        "--without-checks",
+        default="",
+        help="judge the verdicts again without these check kinds, e.g. metric_error (comma "
+        "separated; from the cached checks, nothing is calibrated again): what a verdict "
+        "without them would have said",
+    )
     args = parser.parse_args(argv)
     seeds = parse_seeds(args.seeds)
+    dropped = {kind.strip() for kind in args.without_checks.split(",") if kind.strip()}
     worlds = parse_worlds(args.worlds)
     if args.jobs < 1 or not args.rate_scale > 0:
         raise SystemExit("--jobs must be 1 or more and --rate-scale positive")
@@ -527,10 +560,13 @@ def main(argv: Sequence[str] | None = None) -> None:
                 file=sys.stderr,
                 flush=True,
             )
-    records.sort(key=lambda r: (r.method, r.world, r.seed))
+    records = sorted(
+        (without_checks(r, dropped) for r in records), key=lambda r: (r.method, r.world, r.seed)
+    )
     print(
         f"# bench_random: seeds {args.seeds}, rate scale {args.rate_scale:g}"
         + (f", worlds {args.worlds}" if args.worlds else "")
+        + (f", verdicts judged without {', '.join(sorted(dropped))}" if dropped else "")
         + "\n"
     )
     print(report(records, args.methods))

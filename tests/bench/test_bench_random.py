@@ -17,6 +17,7 @@ from tests.bench.bench_random import (
     result_path,
     run_seed,
     summary_row,
+    without_checks,
     world_pairs,
     world_pairs_table,
 )
@@ -69,6 +70,33 @@ def test_summary_counts_success_and_every_cell_of_the_confusion_table() -> None:
     # error / sigma: translation [1, 0.5] per record, rotation [2, 1].
     assert cells[16] == f"{(0.625) ** 0.5:.2f} / {(2.5) ** 0.5:.2f}"
     assert cells[17] == f"{(5 * 2.0) / 6:.1f}"
+
+
+def _check(name: str, passed: bool) -> dict[str, object]:
+    return {"name": name, "value": 0.05, "limit": 0.04, "passed": passed}
+
+
+def test_verdicts_are_judged_again_without_the_named_kinds_of_check() -> None:
+    failed_on_metric = _record(1, 3.0, 0.05, False)
+    failed_on_metric.checks = [_check("metric_error", False), _check("convergence", True)]
+    failed_on_two = _record(2, 3.0, 0.05, False)
+    failed_on_two.checks = [
+        _check("metric_error", False),
+        _check("uncertainty_translation:lidar_1", False),
+        _check("uncertainty_rotation:lidar_1", True),
+    ]
+    again = without_checks(failed_on_metric, {"metric_error"})
+    assert again.passed and again.failed_checks == [] and not failed_on_metric.passed
+    still = without_checks(failed_on_two, {"metric_error"})
+    assert not still.passed and still.failed_checks == ["uncertainty_translation:lidar_1"]
+    assert without_checks(failed_on_two, {"uncertainty_translation"}).failed_checks == [
+        "metric_error"
+    ]
+    assert without_checks(failed_on_two, set()) is failed_on_two
+    refused = SeedResult(3, "proposed", "loop/mixed/small", "synced", refused="NoStopsError: x")
+    assert without_checks(refused, {"metric_error"}) is refused
+    with pytest.raises(SystemExit, match="keeps no checks"):
+        without_checks(_record(4, 3.0, 0.05, True), {"metric_error"})
 
 
 def test_grouped_tables_have_a_row_per_group_and_one_over_all() -> None:
