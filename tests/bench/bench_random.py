@@ -245,8 +245,9 @@ def distance_histogram(capped: NDArray[np.float64], cap_m: float) -> list[int]:
 
 def without_checks(record: SeedResult, kinds: Collection[str]) -> SeedResult:
     """`record` judged again as if the verdict had no checks of these kinds (a check's kind is
-    its name before `:`, e.g. `metric_error`, `overlap`): passed when every other check passed.
-    A refusal stays one; a result cached before the checks were kept cannot be judged again."""
+    its name before `:`, e.g. `metric_error`, `convergence`): passed when every other check
+    passed. A refusal stays one; a result cached before the checks were kept cannot be judged
+    again."""
     if record.refused is not None or not kinds:
         return record
     if not record.checks:
