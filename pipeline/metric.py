@@ -133,13 +133,15 @@ class SolutionComparison:
     the kept solution places the points, point by point (eq. 12 of the other less eq. 12 of the
     kept: positive when the kept one fits better). `stderr_m`: that difference's standard error,
     a leave-one-block-out jackknife over `blocks` cubic blocks of space (the points of one surface
-    patch err together, so they are left out together)."""
+    patch err together, so they are left out together). `other_T_ref_lidar` (L, 4, 4): the other
+    solution's extrinsics."""
 
     apart_translation_m: float
     apart_rotation_deg: float
     difference_m: float
     stderr_m: float
     blocks: int
+    other_T_ref_lidar: NDArray[np.float64] | None = None
 
     @property
     def separation_sigmas(self) -> float:
@@ -174,7 +176,7 @@ def compare_solutions(
     translation = max((t for t, _ in apart), default=0.0)
     rotation = max((r for _, r in apart), default=0.0)
     if len(difference) == 0:
-        return SolutionComparison(translation, rotation, math.nan, math.nan, 0)
+        return SolutionComparison(translation, rotation, math.nan, math.nan, 0, other_T_ref_lidar)
     keys = voxel_keys(placed, block_m, "optimisation.uncertainty_block_m")
     _, block_of = np.unique(keys, return_inverse=True)
     block_of = block_of.reshape(-1)
@@ -183,7 +185,7 @@ def compare_solutions(
     counts = np.bincount(block_of, minlength=n)
     mean = float(np.mean(difference))
     if n < 2:
-        return SolutionComparison(translation, rotation, mean, math.nan, n)
+        return SolutionComparison(translation, rotation, mean, math.nan, n, other_T_ref_lidar)
     left_out = (sums.sum() - sums) / (counts.sum() - counts)
     stderr = float(np.sqrt((n - 1) / n * np.sum((left_out - left_out.mean()) ** 2)))
-    return SolutionComparison(translation, rotation, mean, stderr, n)
+    return SolutionComparison(translation, rotation, mean, stderr, n, other_T_ref_lidar)

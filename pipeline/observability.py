@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from pipeline.geometry import adjoint, hat
+from pipeline.geometry import adjoint, hat, log_se3
 from pipeline.optimisation import OptimisationResult
 from pipeline.transforms import Matrix4, make_transform
 
@@ -268,12 +268,20 @@ def _beyond_chance(
     return result
 
 
+def _offset(T_level_lidar: Matrix4, T_level_other: Matrix4) -> NDArray[np.float64]:
+    """(6,) the other pose of one LiDAR against this one in the axes of `PoseUncertainty`:
+    its origin's shift in the level frame (m), then its rotation vector there (rad)."""
+    rotation = make_transform(T_level_other[:3, :3] @ T_level_lidar[:3, :3].T, np.zeros(3))
+    return np.concatenate([T_level_other[:3, 3] - T_level_lidar[:3, 3], log_se3(rotation)[3:]])
+
+
 def pose_uncertainties(
     result: OptimisationResult,
     T_base_ref: Matrix4,
     up_ref: NDArray[np.float64] | None,
     config: ObservabilityConfig,
     surface_shift: SurfaceShift | None = None,
+    alternative_T_ref_lidar: NDArray[np.float64] | None = None,
 ) -> tuple[PoseUncertainty, ...]:
     """Per LiDAR (reference first), from stage 4's result.
 
@@ -282,7 +290,9 @@ def pose_uncertainties(
     formal one, and with them (in quadrature) the effect of each LiDAR's estimated range bias
     (`config.range_bias`) and the shift of the solution on surfaces smoothed further
     (`surface_shift`: per axis, the part of the shift beyond chance, `sqrt(max(0, s^2 -
-    var_chance))`, the moment estimate of a systematic error).
+    var_chance))`, the moment estimate of a systematic error), and each LiDAR's offset to
+    `alternative_T_ref_lidar` (L, 4, 4), another solution the recording fits alike (the data
+    cannot tell which of the two is the calibration, so the uncertainty spans both).
     Each LiDAR's 6x6 block is turned from the optimiser's twist (in the
     reference frame) into the level-base axes through the LiDAR's origin. `up_ref` (3,): the
     floor normal in the reference LiDAR's frame (None: use the base frame's axes as they are).
@@ -332,5 +342,11 @@ def pose_uncertainties(
             stddev = np.hypot(stddev, _stddev(systematic, col, A))
         if surface_shift is not None:
             stddev = np.hypot(stddev, _beyond_chance(surface_shift, col, A))
+        if alternative_T_ref_lidar is not None:
+            offset = _offset(
+                T_level_ref @ result.T_ref_lidar[lidar],
+                T_level_ref @ alternative_T_ref_lidar[lidar],
+            )
+            stddev = np.hypot(stddev, np.abs(offset))
         results.append(PoseUncertainty(stddev[:3], np.degrees(stddev[3:]), undetermined))
     return tuple(results)

@@ -209,21 +209,32 @@ def _run_checks(evidence: Evidence, config: VerdictConfig) -> list[Check]:
     return checks
 
 
-def _unique_solution(starts: StartsEvidence, config: VerdictConfig, needed: float) -> Check:
-    """Whether the kept one of stage 4's two solutions is the only calibration the data support:
-    the two ended as one, or the maps prefer the kept one by `needed` standard errors."""
+def fits_alike(starts: StartsEvidence, config: VerdictConfig) -> bool:
+    """Whether the recording fits stage 4's two solutions alike: they ended apart (beyond
+    `starts_apart_translation_m` or `starts_apart_rotation_deg`) and the maps prefer the kept one
+    by fewer than `min_start_separation_sigmas` standard errors (False where that is None)."""
+    needed = config.min_start_separation_sigmas
+    if needed is None:
+        return False
     apart = (
         starts.apart_translation_m > config.starts_apart_translation_m
         or starts.apart_rotation_deg > config.starts_apart_rotation_deg
     )
+    return apart and not starts.separation_sigmas >= needed
+
+
+def _unique_solution(starts: StartsEvidence, config: VerdictConfig, needed: float) -> Check:
+    """Whether the kept one of stage 4's two solutions is the only calibration the data support:
+    the two ended as one, or the maps prefer the kept one by `needed` standard errors."""
     sigmas = starts.separation_sigmas
-    passed = not apart or sigmas >= needed
+    passed = not fits_alike(starts, config)
     detail = (
         ""
         if passed
         else f"the recording fits two calibrations {starts.apart_translation_m:.3f} m / "
         f"{starts.apart_rotation_deg:.2f} deg apart almost alike (the kept one lies nearer the "
-        f"reference's map by {sigmas:.1f} standard errors, {needed:g} needed): record again "
+        f"reference's map by {sigmas:.1f} standard errors, {needed:g} needed; the reported "
+        "1-sigma spans both): record again "
         "with objects that tell them apart (fewer look-alike objects, more turning) or from "
         "an initial guess nearer the truth"
     )

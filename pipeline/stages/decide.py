@@ -7,7 +7,7 @@ import dataclasses
 from pipeline.config import PipelineConfig
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, LidarCalibration, required
-from pipeline.verdict import LidarEvidence, StartsEvidence, judge
+from pipeline.verdict import LidarEvidence, judge
 
 
 def lidar_calibrations(state: CalibrationState) -> tuple[LidarCalibration, ...]:
@@ -50,18 +50,6 @@ def evidence(lidar: LidarCalibration) -> LidarEvidence:
     )
 
 
-def _starts(state: CalibrationState) -> StartsEvidence | None:
-    """Stage 4's two solutions side by side, when it had two starts."""
-    compared = state.start_comparison
-    if compared is None:
-        return None
-    return StartsEvidence(
-        apart_translation_m=compared.apart_translation_m,
-        apart_rotation_deg=compared.apart_rotation_deg,
-        separation_sigmas=compared.separation_sigmas,
-    )
-
-
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
     """Judge the calibration: the metric, convergence and every LiDAR's evidence."""
     calibrations = lidar_calibrations(state)
@@ -73,7 +61,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         config.optimisation.max_iterations,
         [evidence(lidar) for lidar in calibrations],
         config.verdict,
-        starts=_starts(state),
+        starts=state.starts_evidence(),
     )
     message = "PASSED" if verdict.passed else f"FAILED: {', '.join(c.name for c in verdict.failed)}"
     return StageOutcome(

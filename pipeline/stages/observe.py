@@ -14,6 +14,7 @@ from pipeline.problem import LidarInfo
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, required
 from pipeline.transforms import Matrix4, make_transform
+from pipeline.verdict import fits_alike
 
 
 def floor_pose(T_base_ref: Matrix4, floor_ref: Plane, height_m: float) -> Matrix4:
@@ -51,12 +52,22 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         None if floor_ref is None else floor_ref.normal,
         config.observability,
         state.surface_shift,
+        _alternative(state, config),
     )
     return StageOutcome(
         dataclasses.replace(state, T_base_ref_calibrated=T_base_ref, uncertainties=uncertainties),
         {"undetermined": sum(len(u.undetermined) for u in uncertainties)},
         _undetermined_message(state.lidars, uncertainties),
     )
+
+
+def _alternative(state: CalibrationState, config: PipelineConfig) -> Matrix4 | None:
+    """The extrinsics (L, 4, 4) of stage 4's other solution where the recording fits it as well
+    as the kept one (the verdict's `unique_solution` fails on it); None otherwise."""
+    starts, compared = state.starts_evidence(), state.start_comparison
+    if starts is None or compared is None or not fits_alike(starts, config.verdict):
+        return None
+    return compared.other_T_ref_lidar
 
 
 def _undetermined_message(

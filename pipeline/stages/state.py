@@ -23,7 +23,7 @@ from pipeline.problem import LidarInfo
 from pipeline.rough_refinement import RoughRefinementResult
 from pipeline.segmentation import FloorFit, Segmentation
 from pipeline.transforms import Matrix4, Points, pose_difference
-from pipeline.verdict import Verdict
+from pipeline.verdict import StartsEvidence, Verdict
 
 _Value = TypeVar("_Value")
 
@@ -125,6 +125,18 @@ class CalibrationState:
     uncertainties: tuple[PoseUncertainty, ...] | None = None
     calibrations: tuple[LidarCalibration, ...] | None = None
     verdict: Verdict | None = None
+
+    def starts_evidence(self) -> StartsEvidence | None:
+        """Stage 4's two solutions side by side as the verdict judges them; None with one
+        start."""
+        compared = self.start_comparison
+        if compared is None:
+            return None
+        return StartsEvidence(
+            apart_translation_m=compared.apart_translation_m,
+            apart_rotation_deg=compared.apart_rotation_deg,
+            separation_sigmas=compared.separation_sigmas,
+        )
 
     @property
     def T_base_ref_initial(self) -> Matrix4:

@@ -73,6 +73,7 @@ def test_a_solution_that_lifts_the_points_off_the_map_fits_worse_by_many_standar
     assert compared.apart_translation_m == pytest.approx(0.03)
     assert compared.difference_m == pytest.approx(0.03, abs=0.003)
     assert compared.separation_sigmas > 10.0
+    np.testing.assert_array_equal(compared.other_T_ref_lidar, other[1])
     swapped = _compare(objects, other, kept, block_m=0.5)
     assert swapped.separation_sigmas < -10.0
 

@@ -2,6 +2,7 @@ import dataclasses
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from pipeline.calibrate import calibrate
 from pipeline.config import PipelineConfig
@@ -10,9 +11,45 @@ from pipeline.observability import (
     block_jackknife_covariance,
     jackknife_covariance,
     level_rotation,
+    pose_uncertainties,
 )
 from pipeline.optimisation import OptimisationResult, ParameterLayout
+from pipeline.transforms import make_transform
 from tests.pipeline.calibration_data import box_calibration, box_problem, floor_only_calibration
+
+
+def _result(
+    layout: ParameterLayout,
+    T_ref_lidar: NDArray[np.float64],
+    stop_information: NDArray[np.float64],
+    stop_gradient: NDArray[np.float64],
+) -> OptimisationResult:
+    """A stage 4 result at `T_ref_lidar` (every stop pose at G) whose information and gradient
+    are the sums of the stops' (S, P, P) and (S, P)."""
+    size = layout.size
+    return OptimisationResult(
+        T_G_ref=np.tile(np.eye(4), (layout.n_stops, 1, 1)),
+        T_ref_lidar=T_ref_lidar,
+        converged=True,
+        iterations=1,
+        error_per_iteration=(0.0,),
+        T_ref_lidar_per_iteration=T_ref_lidar[None],
+        information=stop_information.sum(axis=0),
+        gradient=stop_gradient.sum(axis=0),
+        stop_information=stop_information,
+        stop_gradient=stop_gradient,
+        block_information=np.zeros((0, size, size)),
+        block_gradient=np.zeros((0, size)),
+        range_bias_cross=np.zeros((layout.n_lidars, size)),
+        range_bias_information=np.zeros((layout.n_lidars, layout.n_lidars)),
+        range_bias_gradient=np.zeros(layout.n_lidars),
+        variance_factor=1.0,
+        layout=layout,
+        correspondences=(0, 0),
+        residual_rms_m=0.0,
+        seconds=0.0,
+        kernel_scale_m=0.015,
+    )
 
 
 def test_level_rotation_turns_the_floor_normal_to_z_by_the_shortest_way() -> None:
@@ -63,29 +100,7 @@ def test_the_jackknife_is_exact_leave_one_stop_out_on_a_linear_problem() -> None
     H_j = np.stack([A.T @ A for A in rows])
     # Gradients of the data terms at the solution; the prior's (centred on the solution) is 0.
     b_j = np.stack([A.T @ (A @ theta - y) for A, y in zip(rows, targets, strict=True)])
-    result = OptimisationResult(
-        T_G_ref=np.tile(np.eye(4), (5, 1, 1)),
-        T_ref_lidar=np.tile(np.eye(4), (2, 1, 1)),
-        converged=True,
-        iterations=1,
-        error_per_iteration=(0.0,),
-        T_ref_lidar_per_iteration=np.tile(np.eye(4), (1, 2, 1, 1)),
-        information=H_j.sum(axis=0),
-        gradient=b_j.sum(axis=0),
-        stop_information=H_j,
-        stop_gradient=b_j,
-        block_information=np.zeros((0, size, size)),
-        block_gradient=np.zeros((0, size)),
-        range_bias_cross=np.zeros((layout.n_lidars, size)),
-        range_bias_information=np.zeros((layout.n_lidars, layout.n_lidars)),
-        range_bias_gradient=np.zeros(layout.n_lidars),
-        variance_factor=1.0,
-        layout=layout,
-        correspondences=(0, 0),
-        residual_rms_m=0.0,
-        seconds=0.0,
-        kernel_scale_m=0.015,
-    )
+    result = _result(layout, np.tile(np.eye(4), (2, 1, 1)), H_j, b_j)
     # The brute-force solutions keep the prior centred on the full solution, as the jackknife.
     left_out = []
     for j in everything:
@@ -150,3 +165,20 @@ def test_an_estimated_range_bias_only_ever_widens_the_reported_stddev() -> None:
         assert max(wider.uncertainty.stddev_translation_m) > max(
             plain.uncertainty.stddev_translation_m
         )
+
+
+def test_another_solution_the_data_fit_alike_widens_the_stddev_to_reach_it() -> None:
+    layout = ParameterLayout(n_stops=3, n_lidars=2)
+    size = layout.size
+    T_ref_lidar = np.stack([np.eye(4), make_transform(np.eye(3), [1.0, 0.0, 0.0])])
+    result = _result(layout, T_ref_lidar, np.eye(size)[None] * 1e8, np.zeros((1, size)))
+    # The other solution: LiDAR 1 turned 2 deg about its own vertical and 0.3 m to the left.
+    other = T_ref_lidar.copy()
+    other[1] = make_transform(Rotation.from_euler("z", 2.0, degrees=True).as_matrix(), [1, 0.3, 0])
+    config = ObservabilityConfig(method="formal")
+    alone = pose_uncertainties(result, np.eye(4), None, config)[1]
+    both = pose_uncertainties(result, np.eye(4), None, config, alternative_T_ref_lidar=other)[1]
+    assert max(alone.stddev_translation_m) < 1e-3 and max(alone.stddev_rotation_deg) < 0.01
+    np.testing.assert_allclose(both.stddev_translation_m, [0.0, 0.3, 0.0], atol=1e-3)
+    np.testing.assert_allclose(both.stddev_rotation_deg, [0.0, 0.0, 2.0], atol=0.01)
+    assert both.undetermined == alone.undetermined == ()
