@@ -69,7 +69,9 @@ class ObservabilityConfig(BaseModel):
         "1060 (10.1 mm off, passed by the default with a 1-sigma of 0.3 mm; now 5.5 mm) but "
         "doubles the seconds per recording, and on sparse clouds (set 1 at 5-10 % of the "
         "point rate) the extra passes bend the surfaces themselves and fail good calibrations "
-        "(1.6 mm off, 5.3-5.5 mm reported), see docs/method.md. None: left out",
+        "(1.6 mm off, 5.3-5.5 mm reported), see docs/method.md; all measured with the quadric "
+        "surfaces (`segmentation.surface_model: quadric`), before the beam quadric became the "
+        "default. None: left out",
     )
     method: Literal["jackknife", "formal"] = Field(
         default="jackknife",

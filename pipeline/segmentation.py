@@ -28,6 +28,10 @@ from pipeline.transforms import Points
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
 
 
+SurfaceModel = Literal["plane", "quadric", "beam_quadric", "beam_fit"]
+"""The local surfaces object points are projected onto (`SegmentationConfig.surface_model`)."""
+
+
 class SegmentationConfig(BaseModel):
     """Floor RANSAC and Euclidean clustering; lengths in metres."""
 
@@ -131,26 +135,29 @@ class SegmentationConfig(BaseModel):
     smooth_objects: bool = Field(
         default=True, description="object points are projected onto their local plane (range noise)"
     )
-    surface_model: Literal["plane", "quadric", "beam_quadric", "beam_fit"] = Field(
-        default="quadric",
-        description="the local surface object points are projected onto and take normals from: "
-        "a plane flattens curved objects by a few millimetres over a patch (biased with the view, "
-        "6 mm on full-rate cylinders); a quadric follows them. Under 30 mm of range noise the "
-        "quadric, fitted along its patch's normal, settles the points 3-5 mm behind the true "
-        "surfaces along their beams (seed 1000 at rate 0.3, tests/bench/bench_surface_bias.py); "
-        "a beam quadric fits the same patch along each point's beam and moves the point along "
-        "it (the normal stays the quadric's); smoothed points then lie within ~1 mm of the true "
-        "surfaces on average. Opt-in: over bench_random seeds 1000-1019 at full rate it succeeds "
-        "on 13/20 against 11/20 (spinning 3.84 against 4.90 mm mean) but passes seed 1017 10.2 mm "
-        "off (a second false pass, mixed LiDARs; 5.0 mm with quadric) and is worse on set1-box "
-        "seed 0 (3.8 against 1.7 mm). beam_fit (opt-in, experimental) is beam_quadric with each "
-        "normal from the plane fitted along the point's beam (C^-1 b, not tilted by range "
-        "noise; `local_planes`): on 2 cm voxels under 2 cm of noise its normals are far "
-        "closer to the surface's (median 7.7 against 28 deg, tests/pipeline/test_surfaces.py) "
-        "and it takes seed 1013 from 10.4 to 1.4 mm, but ambiguous patches lean their normals "
-        "on the beams: seeds 1000, 1006, 1010, 1015 and 1017 pass 11-21 mm off (five false "
-        "passes over 1000-1019, against one; both with 30-point patches) and set1-box seeds 0-4 "
-        "end 9.5-17.7 mm off (1.7-2.4 with quadric)",
+    surface_model: SurfaceModel = Field(
+        default="beam_quadric",
+        description="the local surface object points are projected onto and take normals from: a "
+        "plane flattens curved objects by a few millimetres over a patch (biased with"
+        " the view, 6 mm on full-rate cylinders); a quadric follows them. Under 30 mm"
+        " of range noise the quadric, fitted along its patch's normal, settles the "
+        "points 3-5 mm behind the true surfaces along their beams "
+        "(tests/bench/bench_surface_bias.py); the beam quadric (the default) fits the"
+        " same patch along each point's beam and moves the point along it (the normal"
+        " stays the quadric's), and its smoothed points lie within ~1 mm of the true "
+        "surfaces on average. Over bench_random seeds 1000-1099 at full rate "
+        "(80-point patches) it succeeds on 89 of 100 against the quadric's 87, with "
+        "no false pass against one, median 1.22 against 1.86 mm, but six false fails "
+        "against four and a few thousandths of a degree worse on rosettes turning in "
+        "place (docs/method.md). beam_fit (opt-in, experimental) is beam_quadric with"
+        " each normal from the plane fitted along the point's beam (C^-1 b, not "
+        "tilted by range noise; `local_planes`): on 2 cm voxels under 2 cm of noise "
+        "its normals are far closer to the surface's (median 7.7 against 28 deg, "
+        "tests/pipeline/test_surfaces.py) and it takes seed 1013 from 10.4 to 1.4 mm,"
+        " but ambiguous patches lean their normals on the beams: seeds 1000, 1006, "
+        "1010, 1015 and 1017 pass 11-21 mm off (five false passes over 1000-1019, "
+        "against one with the quadric; 30-point patches) and set1-box seeds 0-4 end "
+        "9.5-17.7 mm off (1.7-2.4 with the quadric)",
     )
     surface_debias: Literal["none", "bootstrap"] = Field(
         default="none",

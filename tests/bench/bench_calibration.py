@@ -135,7 +135,7 @@ CONFIG_METHODS = (
     "without_stage1",
     "without_moving_points",
     "range_bias_estimated",
-    "beam_quadric",
+    "quadric",
     "surface_k30",
     "beam_fit",
     "fine_cauchy",
@@ -166,8 +166,8 @@ def method_config(method: str) -> PipelineConfig:
         data["moving_points"]["enabled"] = False
     elif method == "range_bias_estimated":
         data["observability"]["range_bias"] = "estimated"
-    elif method == "beam_quadric":
-        data["segmentation"]["surface_model"] = "beam_quadric"
+    elif method == "quadric":
+        data["segmentation"]["surface_model"] = "quadric"
     elif method == "beam_fit":
         data["segmentation"]["surface_model"] = "beam_fit"
     elif method == "surface_k30":

@@ -66,7 +66,10 @@ def test_smoothing_along_the_beams_leaves_a_noisy_cylinder_less_biased() -> None
     # the cylinder's points behind it; fitted along the beams, much less.
     noise = 0.03
     normal = synthetic_tally(
-        "cylinder", noise, SegmentationConfig(surface_neighbours=60), repeats=3
+        "cylinder",
+        noise,
+        SegmentationConfig(surface_neighbours=60, surface_model="quadric"),
+        repeats=3,
     )
     beam = synthetic_tally(
         "cylinder",
@@ -84,9 +87,10 @@ def test_the_offset_measured_on_the_cloud_takes_back_what_smoothing_leaves_behin
     # 30 mm of range noise: the quadric settles the cylinder ~8 mm behind it along the beams;
     # the bootstrap's measured offset (segmentation.surface_debias) takes nearly all of it back.
     noise = 0.03
-    plain = synthetic_tally("cylinder", noise, SegmentationConfig(), repeats=3)
+    quadric = SegmentationConfig(surface_model="quadric")
+    plain = synthetic_tally("cylinder", noise, quadric, repeats=3)
     debiased = synthetic_tally(
-        "cylinder", noise, SegmentationConfig(surface_debias="bootstrap"), repeats=3
+        "cylinder", noise, quadric.model_copy(update={"surface_debias": "bootstrap"}), repeats=3
     )
     plain_ray = np.concatenate([o.ray for o in plain.smoothed])
     debiased_ray = np.concatenate([o.ray for o in debiased.smoothed])

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from pipeline.calibrate import CalibrationResult, calibrate, prepare
 from pipeline.config import PipelineConfig
 from pipeline.problem import CalibrationProblem
-from pipeline.segmentation import Segmentation
+from pipeline.segmentation import Segmentation, SegmentationConfig, SurfaceModel
 from pipeline.stages.segment import segment_all
 from pipeline.stages.state import CalibrationState
 from pipeline.synth import Truth, simulate_problem
@@ -34,9 +34,15 @@ def floor_only_problem() -> tuple[CalibrationProblem, Truth]:
 
 
 @cache
-def box_prepared() -> tuple[CalibrationState, tuple[tuple[Segmentation, ...], ...]]:
+def box_prepared(
+    surface_model: SurfaceModel | None = None,
+) -> tuple[CalibrationState, tuple[tuple[Segmentation, ...], ...]]:
+    """The box problem prepared and segmented with the default config (with `surface_model`'s
+    surfaces where given)."""
     problem, _ = box_problem()
     config = PipelineConfig()
+    if surface_model is not None:
+        config = PipelineConfig(segmentation=SegmentationConfig(surface_model=surface_model))
     prepared = prepare(problem, config)
     return prepared, segment_all(prepared, config)
 

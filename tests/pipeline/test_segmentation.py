@@ -60,7 +60,8 @@ def test_floor_and_objects_of_a_synthetic_recording_match_the_truth() -> None:
             assert angle < 0.2
             assert abs(segmentation.floor.offset - height) < 0.005
             above = segmentation.object_points @ normal + height
-            assert np.all(above > config.object_min_height_m - 0.03)
+            # Smoothed along its beam, a point at an object's foot can move a few centimetres.
+            assert np.all(above > config.object_min_height_m - 0.04)
             assert np.all(above < 0.35)  # the objects are 0.25 m tall
             objects += len(segmentation.object_points)
         assert objects > 1000

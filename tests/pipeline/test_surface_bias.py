@@ -41,8 +41,11 @@ def test_segmentation_takes_the_offset_back_only_when_asked() -> None:
     from pipeline.segmentation import _smoothed
 
     raw = _cylinder_seen_from_origin(0.15, noise=0.03, seed=1)
-    plain, normals = _smoothed(raw, SegmentationConfig())
-    debiased, debiased_normals = _smoothed(raw, SegmentationConfig(surface_debias="bootstrap"))
+    quadric = SegmentationConfig(surface_model="quadric")  # the offset the bootstrap measures
+    plain, normals = _smoothed(raw, quadric)
+    debiased, debiased_normals = _smoothed(
+        raw, quadric.model_copy(update={"surface_debias": "bootstrap"})
+    )
     np.testing.assert_array_equal(plain, _fit(raw)[0])
     np.testing.assert_array_equal(debiased_normals, normals)
     # Moved along the normals only, by the offsets the same draw measures.

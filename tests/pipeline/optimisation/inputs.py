@@ -11,6 +11,7 @@ from pipeline.rough_refinement import (
     RoughRefinementResult,
     refine_with_floor,
 )
+from pipeline.segmentation import SurfaceModel
 from pipeline.stages.state import CalibrationState
 from pipeline.transforms import Points
 from tests.pipeline.calibration_data import box_prepared
@@ -26,8 +27,8 @@ class StageInputs:
 
 
 @cache
-def stage_inputs() -> StageInputs:
-    prepared, segments = box_prepared()
+def stage_inputs(surface_model: SurfaceModel | None = None) -> StageInputs:
+    prepared, segments = box_prepared(surface_model)
     planes = [[s.floor for s in row] for row in segments]
     rough = refine_with_floor(
         planes, prepared.T_G_ref, prepared.T_ref_lidar, RoughRefinementConfig()

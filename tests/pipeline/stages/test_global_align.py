@@ -6,6 +6,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.config import PipelineConfig
 from pipeline.geometry import tangent_basis
 from pipeline.global_alignment import GlobalAlignmentConfig
+from pipeline.segmentation import SurfaceModel
 from pipeline.stages import global_align
 from pipeline.stages.runner import Listeners
 from pipeline.stages.state import CalibrationState
@@ -14,10 +15,10 @@ from tests.pipeline.calibration_data import box_prepared, box_problem, true_T_re
 from tests.pipeline.optimisation.inputs import stage_inputs
 
 
-def _after_stage_3() -> CalibrationState:
-    inputs = stage_inputs()
+def _after_stage_3(surface_model: SurfaceModel | None = None) -> CalibrationState:
+    inputs = stage_inputs(surface_model)
     rough = inputs.rough
-    _, segments = box_prepared()
+    _, segments = box_prepared(surface_model)
     return dataclasses.replace(
         inputs.prepared,
         segments=segments,
@@ -50,7 +51,9 @@ def _pushed_far(state: CalibrationState) -> CalibrationState:
 
 
 def test_enabled_it_reports_each_lidar_and_brings_a_far_one_near() -> None:
-    state = _after_stage_3()
+    # The quadric's surfaces: on this sparse fixture (5 % of the rate, one seed) the beam
+    # quadric's scatter the occupancy enough that the best candidate lands 0.18 m / 5.7 deg off.
+    state = _after_stage_3("quadric")
     _, truth = box_problem()
     frames = tuple(lidar.frame for lidar in state.lidars)
     T_true = true_T_ref_lidar(truth, frames)
