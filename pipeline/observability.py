@@ -328,7 +328,8 @@ def pose_uncertainties(
     results = [PoseUncertainty(np.zeros(3), np.zeros(3), ())]
     for lidar in range(1, layout.n_lidars):
         col = layout.lidar(lidar)
-        t = (T_level_ref @ result.T_ref_lidar[lidar])[:3, 3]
+        T_level_lidar = T_level_ref @ result.T_ref_lidar[lidar]
+        t = T_level_lidar[:3, 3]
         # A twist about the level frame's origin moves the LiDAR's origin by rho + phi x t.
         about_origin = np.eye(6)
         about_origin[:3, 3:] = -hat(t)
@@ -345,10 +346,7 @@ def pose_uncertainties(
         if surface_shift is not None:
             stddev = np.hypot(stddev, _beyond_chance(surface_shift, col, A))
         if alternative_T_ref_lidar is not None:
-            offset = _offset(
-                T_level_ref @ result.T_ref_lidar[lidar],
-                T_level_ref @ alternative_T_ref_lidar[lidar],
-            )
+            offset = _offset(T_level_lidar, T_level_ref @ alternative_T_ref_lidar[lidar])
             stddev = np.hypot(stddev, np.abs(offset))
         results.append(PoseUncertainty(stddev[:3], np.degrees(stddev[3:]), undetermined))
     return tuple(results)

@@ -137,27 +137,25 @@ class SegmentationConfig(BaseModel):
     )
     surface_model: SurfaceModel = Field(
         default="beam_quadric",
-        description="the local surface object points are projected onto and take normals from: a "
-        "plane flattens curved objects by a few millimetres over a patch (biased with"
-        " the view, 6 mm on full-rate cylinders); a quadric follows them. Under 30 mm"
-        " of range noise the quadric, fitted along its patch's normal, settles the "
-        "points 3-5 mm behind the true surfaces along their beams "
-        "(tests/bench/bench_surface_bias.py); the beam quadric (the default) fits the"
-        " same patch along each point's beam and moves the point along it (the normal"
-        " stays the quadric's), and its smoothed points lie within ~1 mm of the true "
-        "surfaces on average. Over bench_random seeds 1000-1099 at full rate "
-        "(80-point patches) it succeeds on 89 of 100 against the quadric's 87, with "
-        "no false pass against one, median 1.22 against 1.86 mm, but six false fails "
-        "against four and a few thousandths of a degree worse on rosettes turning in "
-        "place (docs/method.md). beam_fit (opt-in, experimental) is beam_quadric with"
-        " each normal from the plane fitted along the point's beam (C^-1 b, not "
-        "tilted by range noise; `local_planes`): on 2 cm voxels under 2 cm of noise "
-        "its normals are far closer to the surface's (median 7.7 against 28 deg, "
-        "tests/pipeline/test_surfaces.py) and it takes seed 1013 from 10.4 to 1.4 mm,"
-        " but ambiguous patches lean their normals on the beams: seeds 1000, 1006, "
-        "1010, 1015 and 1017 pass 11-21 mm off (five false passes over 1000-1019, "
-        "against one with the quadric; 30-point patches) and set1-box seeds 0-4 end "
-        "9.5-17.7 mm off (1.7-2.4 with the quadric)",
+        description="the local surface object points are projected onto and take normals "
+        "from: a plane flattens curved objects by a few millimetres over a patch (biased with "
+        "the view, 6 mm on full-rate cylinders); a quadric follows them. Under 30 mm of range "
+        "noise the quadric, fitted along its patch's normal, settles the points 3-5 mm behind "
+        "the true surfaces along their beams (tests/bench/bench_surface_bias.py); the beam "
+        "quadric (the default) fits the same patch along each point's beam and moves the point "
+        "along it (the normal stays the quadric's), and its smoothed points lie within ~1 mm "
+        "of the true surfaces on average. Over bench_random seeds 1000-1099 at full rate "
+        "(80-point patches) it succeeds on 89 of 100 against the quadric's 87, with no false "
+        "pass against one, median 1.22 against 1.86 mm, but six false fails against four and a "
+        "few thousandths of a degree worse on rosettes turning in place (docs/method.md). "
+        "beam_fit (opt-in, experimental) is beam_quadric with each normal from the plane "
+        "fitted along the point's beam (C^-1 b, not tilted by range noise; `local_planes`): on "
+        "2 cm voxels under 2 cm of noise its normals are far closer to the surface's (median "
+        "7.7 against 28 deg, tests/pipeline/test_surfaces.py) and it takes seed 1013 from 10.4 "
+        "to 1.4 mm, but ambiguous patches lean their normals on the beams: seeds 1000, 1006, "
+        "1010, 1015 and 1017 pass 11-21 mm off (five false passes over 1000-1019, against one "
+        "with the quadric; 30-point patches) and set1-box seeds 0-4 end 9.5-17.7 mm off "
+        "(1.7-2.4 with the quadric)",
     )
     surface_debias: Literal["none", "bootstrap"] = Field(
         default="none",
