@@ -112,16 +112,21 @@ def true_T_ref_lidar(truth: Truth, frames: Sequence[str]) -> NDArray[np.float64]
     return np.stack([invert(true[frames[0]]) @ true[f] for f in frames])
 
 
+def calibrated_T_ref_lidar(result: CalibrationResult) -> NDArray[np.float64]:
+    """(L, 4, 4) each LiDAR's calibrated pose in the reference LiDAR's frame (reference first)."""
+    from pipeline.transforms import invert
+
+    reference = result.lidars[0].T_base_lidar_calibrated
+    return np.stack([invert(reference) @ x.T_base_lidar_calibrated for x in result.lidars])
+
+
 def calibration_errors(
     result: CalibrationResult, truth: Truth
 ) -> tuple[list[float], list[float], list[float], list[float]]:
     """Per non-reference LiDAR of `result`, relative to its reference: the error of the
     calibrated `T_ref_lidar` against the truth (m, deg) and the norm of the reported 1-sigma
     (m, deg)."""
-    from pipeline.transforms import invert
-
-    reference = result.lidars[0].T_base_lidar_calibrated
-    estimate = np.stack([invert(reference) @ x.T_base_lidar_calibrated for x in result.lidars])
+    estimate = calibrated_T_ref_lidar(result)
     t, r = _errors(estimate, true_T_ref_lidar(truth, [x.frame for x in result.lidars]))
     sigma_t = [float(np.linalg.norm(x.uncertainty.stddev_translation_m)) for x in result.lidars[1:]]
     sigma_r = [float(np.linalg.norm(x.uncertainty.stddev_rotation_deg)) for x in result.lidars[1:]]

@@ -57,6 +57,7 @@ from numpy.typing import NDArray  # noqa: E402
 from tests.bench.bench_calibration import (  # noqa: E402
     CONFIG_METHODS,
     Trial,
+    calibrated_T_ref_lidar,
     calibration_errors,
     method_config,
     paired_table,
@@ -103,6 +104,12 @@ class SeedResult:
     distance_histograms: list[list[int]] = field(default_factory=list)
     """Per non-reference LiDAR, its object points' distances to the reference's map after
     calibration in 1 mm bins, the last bin those at eq. 12's cap (`distance_histogram`)."""
+    stddev: list[list[float]] = field(default_factory=list)
+    """Per non-reference LiDAR its reported 1-sigma per axis: x, y, z (m), roll, pitch, yaw
+    (deg), in the level base axes through its origin (what the verdict's checks judge)."""
+    T_ref_lidar: list[list[list[float]]] = field(default_factory=list)
+    """The calibrated poses of every LiDAR in the reference's frame (reference first): two
+    methods' solutions compared on a seed without calibrating again."""
 
     @property
     def max_translation(self) -> float:
@@ -213,6 +220,11 @@ def run_seed(
             t, r, sigma_t, sigma_r = calibration_errors(result, load_truth(directory))
             record.translation, record.rotation = t, r
             record.sigma_translation, record.sigma_rotation = sigma_t, sigma_r
+            record.T_ref_lidar = calibrated_T_ref_lidar(result).tolist()
+            record.stddev = [
+                [*x.uncertainty.stddev_translation_m, *x.uncertainty.stddev_rotation_deg]
+                for x in result.lidars[1:]
+            ]
             record.passed = bool(result.passed)
             record.metric_error_m = result.metric_error_final
             record.failed_checks = [check.name for check in result.verdict.failed]
