@@ -19,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from pipeline.geometry import adjoint, hat, log_se3
 from pipeline.optimisation import OptimisationResult
+from pipeline.segmentation import SurfaceModel
 from pipeline.transforms import Matrix4, make_transform
 
 DOF_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
@@ -72,6 +73,15 @@ class ObservabilityConfig(BaseModel):
         "(1.6 mm off, 5.3-5.5 mm reported), see docs/method.md; all measured with the quadric "
         "surfaces (`segmentation.surface_model: quadric`), before the beam quadric became the "
         "default. None: left out",
+    )
+    surface_sensitivity_model: SurfaceModel | None = Field(
+        default=None,
+        description="a surface model (`segmentation.surface_model`): stage 4 is run again from "
+        "its solution on object points projected onto that model's surfaces instead, and how "
+        "far each pose moves beyond chance is added to its reported covariance, as with "
+        "surface_sensitivity_passes (both set: both changes at once): the calibration's "
+        "dependence on how the surfaces are modelled, which every stop and every patch "
+        "repeat. None: left out",
     )
     method: Literal["jackknife", "formal"] = Field(
         default="jackknife",

@@ -1,5 +1,6 @@
 """The surfaces' sensitivity: stage 4 run again from its solution on object points smoothed
-further, and how far each pose moves (`observability.surface_sensitivity_passes`).
+further or onto another surface model, and how far each pose moves
+(`observability.surface_sensitivity_passes`, `observability.surface_sensitivity_model`).
 
 Why: under range noise the smoothed object surfaces settle a few millimetres off the true ones,
 and every stop and every patch of a surface repeats that offset, so the jackknifes cannot see
@@ -55,27 +56,27 @@ def shift_vector(
 
 
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:
-    """Segment again with `surface_sensitivity_passes` projections, run stage 4 from its
-    solution on those points (its iterations are not progress: no bar goes back) and keep the
-    shift of every pose, with the spread chance alone would give it (the jackknife over stops
-    of the two objectives' difference at the solution); nothing when the config leaves it
-    out."""
-    passes = config.observability.surface_sensitivity_passes
-    if passes is None:
+    """Segment again with the surfaces `surface_change` gives (more projections, another
+    surface model), run stage 4 from its solution on those points (its iterations are not
+    progress: no bar goes back) and keep the shift of every pose, with the spread chance alone
+    would give it (the jackknife over stops of the two objectives' difference at the
+    solution); nothing when the config leaves it out."""
+    change = surface_change(config)
+    if not change:
         return StageOutcome(state, {"enabled": False}, "not measured (off)")
     optimised = required(state.optimised, "optimisation")
-    smoother = config.model_copy(
-        update={"segmentation": config.segmentation.model_copy(update={"surface_passes": passes})}
+    other = config.model_copy(
+        update={"segmentation": config.segmentation.model_copy(update=change)}
     )
-    resmoothed = dataclasses.replace(state, segments=segment_all(state, smoother))
-    moved = optimise_from(resmoothed, config, Listeners(), (state.T_G_ref, state.T_ref_lidar), 1)
+    refitted = dataclasses.replace(state, segments=segment_all(state, other))
+    moved = optimise_from(refitted, config, Listeners(), (state.T_G_ref, state.T_ref_lidar), 1)
     shift = shift_vector(
         optimised.layout, state.T_G_ref, state.T_ref_lidar, moved.T_G_ref, moved.T_ref_lidar
     )
     chance = shift_chance_covariance(
-        optimised, evaluate_solution(resmoothed, config), config.observability
+        optimised, evaluate_solution(refitted, config), config.observability
     )
-    details: dict[str, Detail] = {"enabled": True, "passes": passes, "iterations": moved.iterations}
+    details: dict[str, Detail] = {"enabled": True, **change, "iterations": moved.iterations}
     largest = 0.0
     for lidar in range(1, optimised.layout.n_lidars):
         moved_m, turned_deg = pose_difference(state.T_ref_lidar[lidar], moved.T_ref_lidar[lidar])
@@ -86,5 +87,18 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     return StageOutcome(
         dataclasses.replace(state, surface_shift=SurfaceShift(shift, chance)),
         details,
-        f"the solution moves up to {1e3 * largest:.1f} mm on surfaces smoothed {passes} times",
+        f"the solution moves up to {1e3 * largest:.1f} mm on surfaces "
+        + ", ".join(f"{key} {value}" for key, value in change.items()),
     )
+
+
+def surface_change(config: PipelineConfig) -> dict[str, int | str]:
+    """The segmentation settings the sensitivity re-run changes (`surface_passes`,
+    `surface_model`), from `observability`'s; empty when it is off."""
+    observability = config.observability
+    change: dict[str, int | str] = {}
+    if observability.surface_sensitivity_passes is not None:
+        change["surface_passes"] = observability.surface_sensitivity_passes
+    if observability.surface_sensitivity_model is not None:
+        change["surface_model"] = observability.surface_sensitivity_model
+    return change

@@ -69,7 +69,7 @@ def test_on_it_measures_a_shift_that_only_widens_the_reported_stddev() -> None:
     frame = state.lidars[1].frame
     moved = outcome.details[f"shift_m:{frame}"]
     assert isinstance(moved, float) and 0.0 < moved < 0.005  # clean boxes: a small shift
-    assert outcome.details["passes"] == 4
+    assert outcome.details["surface_passes"] == 4
     plain, wider = (
         pose_uncertainties(optimised, state.T_base_ref_initial, None, config.observability, s)
         for s in (None, shift)
@@ -104,3 +104,24 @@ def test_the_same_clouds_give_a_shift_no_spread() -> None:
     chance = shift_chance_covariance(optimised, optimised, ObservabilityConfig())
     assert chance is not None
     np.testing.assert_array_equal(chance, np.zeros_like(chance))
+
+
+def test_another_surface_model_is_measured_as_a_change_of_the_surfaces() -> None:
+    config = PipelineConfig(observability=ObservabilityConfig(surface_sensitivity_model="quadric"))
+    assert sensitivity.surface_change(config) == {"surface_model": "quadric"}
+    both = PipelineConfig(
+        observability=ObservabilityConfig(
+            surface_sensitivity_passes=2, surface_sensitivity_model="plane"
+        )
+    )
+    assert sensitivity.surface_change(both) == {"surface_passes": 2, "surface_model": "plane"}
+    assert sensitivity.surface_change(PipelineConfig()) == {}
+    state = _optimised()
+    outcome = sensitivity.run(state, config, Listeners())
+    shift = outcome.state.surface_shift
+    assert shift is not None and np.all(np.isfinite(shift.shift))
+    assert outcome.details["surface_model"] == "quadric"
+    assert "surface_model quadric" in outcome.message
+    # The rear LiDAR moves: the two models settle the points differently, by millimetres.
+    moved = outcome.details[f"shift_m:{state.lidars[1].frame}"]
+    assert isinstance(moved, float) and 0.0 < moved < 0.02
