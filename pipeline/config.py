@@ -83,6 +83,17 @@ class PipelineConfig(BaseModel):
             return data
         return _overlay(cls.model_construct(), data)
 
+    @model_validator(mode="after")
+    def _sensitivity_compares_another_surface_model(self) -> PipelineConfig:
+        own = self.segmentation.surface_model
+        if self.observability.surface_sensitivity_model == own:
+            raise ValueError(
+                f"observability.surface_sensitivity_model is {own!r}, the calibration's own "
+                "surface model (segmentation.surface_model): its re-run would measure nothing; "
+                "name another model, 'alternative' (the usual counterpart) or null (left out)"
+            )
+        return self
+
 
 def _overlay(defaults: BaseModel, given: Mapping[str, Any]) -> dict[str, Any]:
     """Every field of `defaults`, with `given` on top; sections given as mappings are overlaid

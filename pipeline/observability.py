@@ -74,14 +74,15 @@ class ObservabilityConfig(BaseModel):
         "surfaces (`segmentation.surface_model: quadric`), before the beam quadric became the "
         "default. None: left out",
     )
-    surface_sensitivity_model: SurfaceModel | None = Field(
+    surface_sensitivity_model: SurfaceModel | Literal["alternative"] | None = Field(
         default=None,
         description="a surface model (`segmentation.surface_model`): stage 4 is run again from "
         "its solution on object points projected onto that model's surfaces instead, and how "
         "far each pose moves beyond chance is added to its reported covariance, as with "
         "surface_sensitivity_passes (both set: both changes at once): the calibration's "
         "dependence on how the surfaces are modelled, which every stop and every patch "
-        "repeat. None: left out",
+        "repeat. alternative: the quadric where the calibration fits its surfaces along the "
+        "beams (beam_quadric, beam_fit), else the beam quadric. None: left out",
     )
     method: Literal["jackknife", "formal"] = Field(
         default="jackknife",

@@ -23,6 +23,7 @@ from pipeline.config import PipelineConfig
 from pipeline.geometry import log_se3
 from pipeline.observability import SurfaceShift, shift_chance_covariance
 from pipeline.optimisation.layout import ParameterLayout
+from pipeline.segmentation import SurfaceModel
 from pipeline.stages.joint_optimise import evaluate_solution, optimise_from
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.segment import segment_all
@@ -99,6 +100,17 @@ def surface_change(config: PipelineConfig) -> dict[str, int | str]:
     change: dict[str, int | str] = {}
     if observability.surface_sensitivity_passes is not None:
         change["surface_passes"] = observability.surface_sensitivity_passes
-    if observability.surface_sensitivity_model is not None:
-        change["surface_model"] = observability.surface_sensitivity_model
+    model = observability.surface_sensitivity_model
+    if model is not None:
+        change["surface_model"] = (
+            alternative_model(config.segmentation.surface_model)
+            if model == "alternative"
+            else model
+        )
     return change
+
+
+def alternative_model(own: SurfaceModel) -> SurfaceModel:
+    """The surface model the sensitivity re-run compares `own` with: the quadric fitted along
+    its patch's normal where `own` fits along the beams, else the beam quadric."""
+    return "quadric" if own in ("beam_quadric", "beam_fit") else "beam_quadric"

@@ -197,7 +197,7 @@ def method_config(method: str) -> PipelineConfig:
     elif method == "surface_sensitivity":
         data["observability"]["surface_sensitivity_passes"] = 4
     elif method == "model_sensitivity":
-        data["observability"]["surface_sensitivity_model"] = "quadric"
+        data["observability"]["surface_sensitivity_model"] = "alternative"
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method == "every_lidar":

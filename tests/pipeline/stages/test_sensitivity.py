@@ -1,4 +1,6 @@
 import numpy as np
+import pytest
+from pydantic import ValidationError
 
 from pipeline.config import PipelineConfig
 from pipeline.geometry import exp_se3
@@ -116,6 +118,17 @@ def test_another_surface_model_is_measured_as_a_change_of_the_surfaces() -> None
     )
     assert sensitivity.surface_change(both) == {"surface_passes": 2, "surface_model": "plane"}
     assert sensitivity.surface_change(PipelineConfig()) == {}
+    alternative = ObservabilityConfig(surface_sensitivity_model="alternative")
+    for own, other in (
+        ("beam_quadric", "quadric"),
+        ("beam_fit", "quadric"),
+        ("quadric", "beam_quadric"),
+        ("plane", "beam_quadric"),
+    ):
+        pair = PipelineConfig(
+            segmentation=SegmentationConfig(surface_model=own), observability=alternative
+        )
+        assert sensitivity.surface_change(pair) == {"surface_model": other}
     state = _optimised()
     outcome = sensitivity.run(state, config, Listeners())
     shift = outcome.state.surface_shift
@@ -125,3 +138,11 @@ def test_another_surface_model_is_measured_as_a_change_of_the_surfaces() -> None
     # The rear LiDAR moves: the two models settle the points differently, by millimetres.
     moved = outcome.details[f"shift_m:{state.lidars[1].frame}"]
     assert isinstance(moved, float) and 0.0 < moved < 0.02
+
+
+def test_the_calibrations_own_surface_model_is_refused_as_its_alternative() -> None:
+    with pytest.raises(ValidationError, match="would measure nothing"):
+        PipelineConfig(
+            segmentation=SegmentationConfig(surface_model="quadric"),
+            observability=ObservabilityConfig(surface_sensitivity_model="quadric"),
+        )
