@@ -119,12 +119,13 @@ def test_another_surface_model_is_measured_as_a_change_of_the_surfaces() -> None
     assert sensitivity.surface_change(both) == {"surface_passes": 2, "surface_model": "plane"}
     assert sensitivity.surface_change(PipelineConfig()) == {}
     alternative = ObservabilityConfig(surface_sensitivity_model="alternative")
-    for own, other in (
+    pairs: tuple[tuple[SurfaceModel, SurfaceModel], ...] = (
         ("beam_quadric", "quadric"),
         ("beam_fit", "quadric"),
         ("quadric", "beam_quadric"),
         ("plane", "beam_quadric"),
-    ):
+    )
+    for own, other in pairs:
         pair = PipelineConfig(
             segmentation=SegmentationConfig(surface_model=own), observability=alternative
         )
