@@ -88,8 +88,9 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     return StageOutcome(
         dataclasses.replace(state, surface_shift=SurfaceShift(shift, chance)),
         details,
-        f"the solution moves up to {1e3 * largest:.1f} mm on surfaces "
-        + ", ".join(f"{key} {value}" for key, value in change.items()),
+        f"the solution moves up to {1e3 * largest:.1f} mm on surfaces re-fitted ("
+        + ", ".join(_describe(key, value) for key, value in change.items())
+        + ")",
     )
 
 
@@ -114,3 +115,10 @@ def alternative_model(own: SurfaceModel) -> SurfaceModel:
     """The surface model the sensitivity re-run compares `own` with: the quadric fitted along
     its patch's normal where `own` fits along the beams, else the beam quadric."""
     return "quadric" if own in ("beam_quadric", "beam_fit") else "beam_quadric"
+
+
+def _describe(setting: str, value: int | str) -> str:
+    """One changed segmentation setting in words: `surface_passes` 4 -> "4 projections"."""
+    if setting == "surface_passes":
+        return f"{value} projections"
+    return f"the {str(value).replace('_', ' ')} model"

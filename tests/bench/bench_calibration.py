@@ -154,7 +154,7 @@ CONFIG_METHODS = (
     "surface_passes2",
     "surface_passes4",
     "surface_sensitivity",
-    "model_sensitivity",
+    "without_model_sensitivity",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -196,8 +196,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_debias"] = "bootstrap"
     elif method == "surface_sensitivity":
         data["observability"]["surface_sensitivity_passes"] = 4
-    elif method == "model_sensitivity":
-        data["observability"]["surface_sensitivity_model"] = "alternative"
+    elif method == "without_model_sensitivity":
+        data["observability"]["surface_sensitivity_model"] = None
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method == "every_lidar":

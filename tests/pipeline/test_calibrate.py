@@ -15,13 +15,15 @@ from pipeline.transforms import invert, pose_difference
 from tests.pipeline.calibration_data import (
     box_calibration,
     box_problem,
+    dense_box_calibration,
+    dense_box_problem,
     floor_only_calibration,
 )
 
 
 def test_calibration_recovers_the_extrinsics_and_passes() -> None:
-    problem, truth = box_problem()
-    result = box_calibration()
+    problem, truth = dense_box_problem()
+    result = dense_box_calibration()
     true = {lidar.frame: lidar.T_base_lidar_true for lidar in truth.lidars}
     reference = result.lidars[0]
     assert reference.is_reference and reference.frame == "lidar_front"

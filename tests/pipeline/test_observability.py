@@ -15,7 +15,12 @@ from pipeline.observability import (
 )
 from pipeline.optimisation import OptimisationResult, ParameterLayout
 from pipeline.transforms import make_transform
-from tests.pipeline.calibration_data import box_calibration, box_problem, floor_only_calibration
+from tests.pipeline.calibration_data import (
+    box_calibration,
+    box_problem,
+    dense_box_calibration,
+    floor_only_calibration,
+)
 
 
 def _result(
@@ -63,7 +68,9 @@ def test_level_rotation_turns_the_floor_normal_to_z_by_the_shortest_way() -> Non
 
 
 def test_objects_determine_every_degree_of_freedom() -> None:
-    result = box_calibration()
+    # Twice the sparse fixture's rate: at 5 % the surfaces' two models place the rear LiDAR
+    # 7 mm apart, and the 1-sigma says so (a fact of sparse clouds, not of determination).
+    result = dense_box_calibration()
     for lidar in result.lidars[1:]:
         assert lidar.uncertainty.undetermined == ()
         assert max(lidar.uncertainty.stddev_translation_m) < 0.005

@@ -5,7 +5,11 @@ import pytest
 
 from pipeline.result import dumps, result_document, result_schema
 from pipeline.result_model import ResultDocument
-from tests.pipeline.calibration_data import box_calibration, floor_only_calibration
+from tests.pipeline.calibration_data import (
+    box_calibration,
+    dense_box_calibration,
+    floor_only_calibration,
+)
 
 
 @pytest.mark.parametrize("calibration", [box_calibration, floor_only_calibration])
@@ -18,7 +22,7 @@ def test_result_json_satisfies_the_schema(calibration) -> None:  # type: ignore[
 
 
 def test_the_contract_fields_of_a_passed_calibration() -> None:
-    result = box_calibration()
+    result = dense_box_calibration()
     document = result_document(result)
     assert document["schema_version"] == 1
     assert document["reference_frame"] == "lidar_front"

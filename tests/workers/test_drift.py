@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.result import result_document
 from pipeline.transforms import to_translation_xyzw
-from tests.pipeline.calibration_data import box_calibration, floor_only_calibration
+from tests.pipeline.calibration_data import dense_box_calibration, floor_only_calibration
 from workers.context import Pose, Reference
 from workers.drift import compare, judged_against
 
@@ -21,7 +21,7 @@ RUN = "00000000-0000-0000-0000-000000000001"
 def moved(translation_m: float, yaw_deg: float) -> Pose:
     """The rear LiDAR's calibrated pose, `translation_m` further back and turned `yaw_deg`."""
     translation, quaternion = to_translation_xyzw(
-        box_calibration().lidar(REAR).T_base_lidar_calibrated
+        dense_box_calibration().lidar(REAR).T_base_lidar_calibrated
     )
     x, y, z = translation.tolist()
     rotation = Rotation.from_quat(quaternion) * Rotation.from_euler("z", yaw_deg, degrees=True)
@@ -41,10 +41,10 @@ def last_accepted(translation_m: float, yaw_deg: float) -> Reference:
 
 
 def test_drift_within_limits_keeps_the_verdict_and_is_reported() -> None:
-    assert box_calibration().verdict.passed
-    evidence = compare(box_calibration(), last_accepted(0.004, 0.2))
+    assert dense_box_calibration().verdict.passed
+    evidence = compare(dense_box_calibration(), last_accepted(0.004, 0.2))
     assert evidence.lidars[REAR] == pytest.approx((0.004, 0.2), abs=1e-6)
-    result = judged_against(box_calibration(), last_accepted(0.004, 0.2))
+    result = judged_against(dense_box_calibration(), last_accepted(0.004, 0.2))
     assert result.verdict.passed
     document = result_document(result)
     assert document["drift"] == {
@@ -61,12 +61,12 @@ def test_drift_within_limits_keeps_the_verdict_and_is_reported() -> None:
     }
     names = [check["name"] for check in document["verdict"]["checks"]]
     assert names[-2:] == ["drift_translation:lidar_rear", "drift_rotation:lidar_rear"]
-    assert document["stages"] == result_document(box_calibration())["stages"]
+    assert document["stages"] == result_document(dense_box_calibration())["stages"]
 
 
 @pytest.mark.parametrize(("translation_m", "yaw_deg"), [(0.03, 0.0), (0.0, 2.0)])
 def test_a_moved_mount_fails_the_run(translation_m: float, yaw_deg: float) -> None:
-    verdict = judged_against(box_calibration(), last_accepted(translation_m, yaw_deg)).verdict
+    verdict = judged_against(dense_box_calibration(), last_accepted(translation_m, yaw_deg)).verdict
     assert not verdict.passed
     expected = "translation" if translation_m else "rotation"
     assert [check.name for check in verdict.failed] == [f"drift_{expected}:lidar_rear"]
@@ -75,8 +75,8 @@ def test_a_moved_mount_fails_the_run(translation_m: float, yaw_deg: float) -> No
 
 def test_without_limits_drift_is_reported_but_not_judged() -> None:
     reference = Reference(against="design", poses={REAR: moved(0.05, 3.0)})
-    result = judged_against(box_calibration(), reference)
-    assert result.verdict == box_calibration().verdict
+    result = judged_against(dense_box_calibration(), reference)
+    assert result.verdict == dense_box_calibration().verdict
     assert result_document(result)["drift"]["lidars"][REAR]["translation_m"] == pytest.approx(0.05)
 
 
@@ -95,4 +95,4 @@ def test_a_lidar_of_the_design_that_was_not_calibrated_fails_a_limited_check() -
 
 def test_an_unknown_reference_kind_is_refused() -> None:
     with pytest.raises(ValueError, match="expected one of"):
-        compare(box_calibration(), Reference(against="yesterday", poses={}))
+        compare(dense_box_calibration(), Reference(against="yesterday", poses={}))

@@ -25,9 +25,11 @@ def run(*args: str) -> Result:
 
 @pytest.fixture(scope="module")
 def box_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Set 1 with boxes at 5 % of the Mid-70 rate: every degree of freedom determined."""
+    """Set 1 with boxes at 10 % of the Mid-70 rate: every degree of freedom determined, and
+    dense enough that the surfaces' two models agree (at 5 % they move the rear LiDAR by more
+    than the 5 mm tolerance, and the verdict fails on its 1-sigma)."""
     directory = tmp_path_factory.mktemp("box")
-    write_recording("set1-box", directory, seed=1, rate_scale=0.05)
+    write_recording("set1-box", directory, seed=1, rate_scale=0.1)
     return directory / "recording"
 
 

@@ -43,9 +43,10 @@ def test_the_shift_vector_holds_each_moved_pose_in_its_own_columns() -> None:
     np.testing.assert_allclose(shift, expected, atol=1e-12)
 
 
-def test_off_by_default_nothing_is_measured() -> None:
+def test_left_out_nothing_is_measured() -> None:
     state = _after_stage_3()
-    outcome = sensitivity.run(state, PipelineConfig(), Listeners())
+    off = PipelineConfig(observability=ObservabilityConfig(surface_sensitivity_model=None))
+    outcome = sensitivity.run(state, off, Listeners())
     assert outcome.state is state and outcome.state.surface_shift is None
     assert outcome.details == {"enabled": False}
 
@@ -56,7 +57,9 @@ def test_on_it_measures_a_shift_that_only_widens_the_reported_stddev() -> None:
     state = _optimised("quadric")
     config = PipelineConfig(
         segmentation=SegmentationConfig(surface_model="quadric"),
-        observability=ObservabilityConfig(surface_sensitivity_passes=4),
+        observability=ObservabilityConfig(
+            surface_sensitivity_passes=4, surface_sensitivity_model=None
+        ),
     )
     heard: list[tuple[int, int]] = []
     outcome = sensitivity.run(state, config, Listeners(on_iteration=lambda *a: heard.append(a)))
@@ -117,7 +120,10 @@ def test_another_surface_model_is_measured_as_a_change_of_the_surfaces() -> None
         )
     )
     assert sensitivity.surface_change(both) == {"surface_passes": 2, "surface_model": "plane"}
-    assert sensitivity.surface_change(PipelineConfig()) == {}
+    # On by default: the beam quadric's surfaces against the quadric's.
+    assert sensitivity.surface_change(PipelineConfig()) == {"surface_model": "quadric"}
+    off = ObservabilityConfig(surface_sensitivity_model=None)
+    assert sensitivity.surface_change(PipelineConfig(observability=off)) == {}
     alternative = ObservabilityConfig(surface_sensitivity_model="alternative")
     pairs: tuple[tuple[SurfaceModel, SurfaceModel], ...] = (
         ("beam_quadric", "quadric"),
@@ -135,7 +141,7 @@ def test_another_surface_model_is_measured_as_a_change_of_the_surfaces() -> None
     shift = outcome.state.surface_shift
     assert shift is not None and np.all(np.isfinite(shift.shift))
     assert outcome.details["surface_model"] == "quadric"
-    assert "surface_model quadric" in outcome.message
+    assert "re-fitted (the quadric model)" in outcome.message
     # The rear LiDAR moves: the two models settle the points differently, by millimetres.
     moved = outcome.details[f"shift_m:{state.lidars[1].frame}"]
     assert isinstance(moved, float) and 0.0 < moved < 0.02
