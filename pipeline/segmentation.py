@@ -22,7 +22,7 @@ from scipy.sparse.csgraph import connected_components
 from pipeline.downsample import voxel_downsample
 from pipeline.geometry import Plane, pack_cells, tangent_basis, voxel_keys
 from pipeline.surface_bias import smoothing_offsets
-from pipeline.surfaces import local_planes
+from pipeline.surfaces import LocalSurfaces, local_surfaces
 from pipeline.transforms import Points
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
@@ -191,6 +191,10 @@ class Segmentation:
     input_points: int
     floor_rms_m: float
     seconds: float
+    quadric_object_points: Points | None = None
+    """The object points as the quadric surface model places them (N, 3, same normals), where
+    the beam quadric's fit made them on the way (`LocalSurfaces.along_normals`): the surface
+    sensitivity's alternative without fitting again. None for other models and settings."""
 
 
 def fit_plane(points: Points) -> tuple[NDArray[np.float64], float, float]:
@@ -478,12 +482,13 @@ def segment(points: Points, up: NDArray[np.float64], config: SegmentationConfig)
     return dataclasses.replace(result, seconds=time.perf_counter() - started)
 
 
-def _smoothed(objects: Points, config: SegmentationConfig) -> tuple[Points, Points]:
+def _smoothed(objects: Points, config: SegmentationConfig) -> LocalSurfaces:
     """Object points (N, 3, the sensor at the origin) on their local surfaces, and its normals;
-    with `surface_debias` the fit's own offset from the surface taken back along the normals."""
+    with `surface_debias` the fit's own offset from the surface taken back along the normals
+    (and then no quadric projection kept beside them)."""
 
-    def fit(points: Points) -> tuple[Points, Points]:
-        return local_planes(
+    def fit(points: Points) -> LocalSurfaces:
+        return local_surfaces(
             points,
             config.surface_neighbours,
             config.surface_centre_neighbours,
@@ -493,18 +498,19 @@ def _smoothed(objects: Points, config: SegmentationConfig) -> tuple[Points, Poin
             passes=config.surface_passes,
         )
 
-    projected, normals = fit(objects)
+    surfaces = fit(objects)
     if config.surface_debias == "bootstrap":
         offsets = smoothing_offsets(
             objects,
-            projected,
-            normals,
-            lambda points: fit(points)[0],
+            surfaces.projected,
+            surfaces.normals,
+            lambda points: fit(points).projected,
             config.surface_neighbours,
             np.random.default_rng(config.seed),
         )
-        projected = projected - offsets[:, None] * normals
-    return projected, normals
+        projected = surfaces.projected - offsets[:, None] * surfaces.normals
+        return LocalSurfaces(projected, surfaces.normals)
+    return surfaces
 
 
 def segment_on_floor(
@@ -528,12 +534,16 @@ def segment_on_floor(
     kept = sizes >= config.min_cluster_points
     objects = candidates[kept[labels]] if len(labels) else candidates
     normals = np.zeros((0, 3))
+    quadric_objects = None
     if len(objects) >= 3:
-        projected, normals = _smoothed(objects, config)
+        surfaces = _smoothed(objects, config)
+        normals = surfaces.normals
         # The sensor sits at the origin: the beam to p is p / |p|.
         cos = np.abs(np.einsum("ni,ni->n", normals, objects)) / np.linalg.norm(objects, axis=1)
         seen = cos >= config.min_incidence_cos
-        objects = (projected if config.smooth_objects else objects)[seen]
+        if config.smooth_objects and surfaces.along_normals is not None:
+            quadric_objects = surfaces.along_normals[seen]
+        objects = (surfaces.projected if config.smooth_objects else objects)[seen]
         normals = normals[seen]
     else:
         objects = objects[:0]
@@ -546,4 +556,5 @@ def segment_on_floor(
         input_points=len(points),
         floor_rms_m=rms,
         seconds=time.perf_counter() - started,
+        quadric_object_points=quadric_objects,
     )

@@ -6,6 +6,10 @@ optimiser (normals for the point-to-plane residual).
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+from typing import TypedDict, Unpack
+
 import numpy as np
 from numpy.typing import NDArray
 from pykdtree.kdtree import KDTree
@@ -13,15 +17,20 @@ from pykdtree.kdtree import KDTree
 from pipeline.transforms import Points
 
 
+class SurfaceOptions(TypedDict, total=False):
+    """How `local_planes` and `local_surfaces` fit each patch (see `local_planes`)."""
+
+    quadric: bool
+    along_beams: bool
+    normals_along_beams: bool
+    passes: int
+
+
 def local_planes(
     points: Points,
     neighbours: int,
     centre_neighbours: int | None = None,
-    *,
-    quadric: bool = False,
-    along_beams: bool = False,
-    normals_along_beams: bool = False,
-    passes: int = 1,
+    **options: Unpack[SurfaceOptions],
 ) -> tuple[Points, Points]:
     """Each point projected onto its local surface, and that surface's unit normal there:
     (N, 3), (N, 3).
@@ -60,21 +69,51 @@ def local_planes(
     tilts and shifts its patch's frame, so under heavy noise the projected points still form a
     sheet several millimetres thick; every further pass thins it (see `SegmentationConfig`).
     """
+    surfaces = local_surfaces(points, neighbours, centre_neighbours, **options)
+    return surfaces.projected, surfaces.normals
+
+
+@dataclass(frozen=True)
+class LocalSurfaces:
+    """`local_planes`' projections (N, 3) and normals (N, 3), and `along_normals` (N, 3): where
+    the points were moved along their beams onto quadrics (`quadric`, `along_beams`, one pass,
+    not `normals_along_beams`), where the quadric fitted along each patch's normal put them on
+    the way: exactly what `quadric=True` alone returns, with the same normals. None
+    otherwise."""
+
+    projected: Points
+    normals: Points
+    along_normals: Points | None = None
+
+
+def local_surfaces(
+    points: Points,
+    neighbours: int,
+    centre_neighbours: int | None = None,
+    *,
+    quadric: bool = False,
+    along_beams: bool = False,
+    normals_along_beams: bool = False,
+    passes: int = 1,
+) -> LocalSurfaces:
+    """`local_planes` (which see), keeping the quadric's projection along the normals that the
+    beam quadric computes on the way (`LocalSurfaces.along_normals`): both surface models from
+    one fit, for a caller that compares them."""
     if len(points) < 3:
-        return points.copy(), np.tile(np.array([0.0, 0.0, 1.0]), (len(points), 1))
+        return LocalSurfaces(points.copy(), np.tile(np.array([0.0, 0.0, 1.0]), (len(points), 1)))
     k = min(neighbours, len(points))
     _, idx = KDTree(points).query(points, k=k)
-    projected, normals = points, np.zeros_like(points)
+    surfaces = LocalSurfaces(points, np.zeros_like(points))
     for _ in range(max(passes, 1)):
-        projected, normals = _project(
-            projected,
+        surfaces = _project(
+            surfaces.projected,
             idx,
             centre_neighbours,
             quadric=quadric,
             along_beams=along_beams,
             normals_along_beams=normals_along_beams,
         )
-    return projected, normals
+    return surfaces if passes <= 1 else dataclasses.replace(surfaces, along_normals=None)
 
 
 def _project(
@@ -85,7 +124,7 @@ def _project(
     quadric: bool,
     along_beams: bool,
     normals_along_beams: bool,
-) -> tuple[Points, Points]:
+) -> LocalSurfaces:
     """One pass of `local_planes` over the neighbourhoods `idx` (N, k) of `points`."""
     k = idx.shape[1]
     # One contiguous (N, k) array per axis: strided views of an (N, k, 3) gather are slower.
@@ -110,17 +149,20 @@ def _project(
     )
     if quadric and k >= 10:
         projected, fitted = _quadric_surfaces(points, idx, normals)
+        kept = normals if normals_along_beams else fitted
         if along_beams:
             # Only where the point goes: the normal from a quadric fitted along a beam has six
             # coefficients to spend on a patch seen on one or two scan lines.
+            along_normals = None if normals_along_beams else projected
             projected, _ = _quadric_surfaces(points, idx, beams)
-        return projected, normals if normals_along_beams else fitted
+            return LocalSurfaces(projected, kept, along_normals)
+        return LocalSurfaces(projected, kept)
     if centre_neighbours is not None and centre_neighbours < k:
         # pykdtree returns the neighbours nearest first.
         near = idx[:, :centre_neighbours]
         centroid = np.column_stack([points[:, axis][near].mean(axis=1) for axis in range(3)])
     offset = np.einsum("ni,ni->n", normals, points - centroid)
-    return points - offset[:, None] * normals, normals
+    return LocalSurfaces(points - offset[:, None] * normals, normals)
 
 
 def _normals_along_beams(covariance: NDArray[np.float64], beams: Points) -> Points:

@@ -23,11 +23,11 @@ from pipeline.config import PipelineConfig
 from pipeline.geometry import log_se3
 from pipeline.observability import SurfaceShift, shift_chance_covariance
 from pipeline.optimisation.layout import ParameterLayout
-from pipeline.segmentation import SurfaceModel
+from pipeline.segmentation import Segmentation, SurfaceModel
 from pipeline.stages.joint_optimise import evaluate_solution, optimise_from
 from pipeline.stages.runner import Listeners, StageOutcome
 from pipeline.stages.segment import segment_all
-from pipeline.stages.state import CalibrationState, Detail, required
+from pipeline.stages.state import CalibrationState, Detail, PerCloud, required
 from pipeline.transforms import Matrix4, invert, pose_difference
 
 
@@ -69,7 +69,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     other = config.model_copy(
         update={"segmentation": config.segmentation.model_copy(update=change)}
     )
-    refitted = dataclasses.replace(state, segments=segment_all(state, other))
+    refitted = dataclasses.replace(state, segments=refitted_segments(state, config, other))
     moved = optimise_from(refitted, config, Listeners(), (state.T_G_ref, state.T_ref_lidar), 1)
     shift = shift_vector(
         optimised.layout, state.T_G_ref, state.T_ref_lidar, moved.T_G_ref, moved.T_ref_lidar
@@ -91,6 +91,38 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         f"the solution moves up to {1e3 * largest:.1f} mm on surfaces re-fitted ("
         + ", ".join(_describe(key, value) for key, value in change.items())
         + ")",
+    )
+
+
+def refitted_segments(
+    state: CalibrationState, config: PipelineConfig, other: PipelineConfig
+) -> PerCloud[Segmentation]:
+    """`state`'s clouds segmented with `other`'s surfaces. Where `other` only swaps the beam
+    quadric (one pass, no debias, smoothed objects) for the quadric, the beam quadric's fit
+    already placed the points on the quadric on the way (`Segmentation.quadric_object_points`,
+    the same normals and points kept; None where a cloud had too few points for a quadric,
+    whose plane fit both models share): no second fit. Otherwise segmented again."""
+    own = config.segmentation
+    shared_fit = (
+        surface_change(config) == {"surface_model": "quadric"}
+        and own.surface_model == "beam_quadric"
+        and own.surface_passes == 1
+        and own.surface_debias == "none"
+        and own.smooth_objects
+    )
+    if not shared_fit:
+        return segment_all(state, other)
+    return tuple(
+        tuple(
+            dataclasses.replace(
+                s,
+                object_points=s.object_points
+                if s.quadric_object_points is None
+                else s.quadric_object_points,
+            )
+            for s in row
+        )
+        for row in required(state.segments, "segmentation")
     )
 
 

@@ -42,10 +42,10 @@ def test_segmentation_takes_the_offset_back_only_when_asked() -> None:
 
     raw = _cylinder_seen_from_origin(0.15, noise=0.03, seed=1)
     quadric = SegmentationConfig(surface_model="quadric")  # the offset the bootstrap measures
-    plain, normals = _smoothed(raw, quadric)
-    debiased, debiased_normals = _smoothed(
-        raw, quadric.model_copy(update={"surface_debias": "bootstrap"})
-    )
+    fitted = _smoothed(raw, quadric)
+    plain, normals = fitted.projected, fitted.normals
+    debiased_fit = _smoothed(raw, quadric.model_copy(update={"surface_debias": "bootstrap"}))
+    debiased, debiased_normals = debiased_fit.projected, debiased_fit.normals
     np.testing.assert_array_equal(plain, _fit(raw)[0])
     np.testing.assert_array_equal(debiased_normals, normals)
     # Moved along the normals only, by the offsets the same draw measures.

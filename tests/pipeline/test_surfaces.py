@@ -1,7 +1,7 @@
 import numpy as np
 
 from pipeline.downsample import voxel_downsample
-from pipeline.surfaces import local_planes, smallest_eigenvectors
+from pipeline.surfaces import local_planes, local_surfaces, smallest_eigenvectors
 
 
 def test_smallest_eigenvectors_match_eigh() -> None:
@@ -77,6 +77,23 @@ def test_along_beams_moves_each_point_along_its_beam_onto_a_plane() -> None:
     # ... and lands nearer the plane x = 3, with the plane's normal.
     assert np.std(projected[:, 0] - 3.0) < 0.4 * np.std(noisy[:, 0] - 3.0)
     assert np.median(np.abs(normals[:, 0])) > 0.995
+
+
+def test_the_beam_quadric_keeps_the_quadrics_own_projection_on_the_way() -> None:
+    points, _ = _oblique_plane_under_range_noise(3)
+    beam = local_surfaces(points, 30, quadric=True, along_beams=True)
+    projected, normals = local_planes(points, 30, quadric=True)
+    assert beam.along_normals is not None
+    np.testing.assert_array_equal(beam.along_normals, projected)
+    np.testing.assert_array_equal(beam.normals, normals)
+    assert not np.array_equal(beam.projected, projected)
+    # Kept only where it is the quadric's: one pass, normals not taken along the beams.
+    for kept in (
+        local_surfaces(points, 30, quadric=True),
+        local_surfaces(points, 30, quadric=True, along_beams=True, passes=2),
+        local_surfaces(points, 30, quadric=True, along_beams=True, normals_along_beams=True),
+    ):
+        assert kept.along_normals is None
 
 
 def _oblique_plane_under_range_noise(seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -14,6 +14,7 @@ from pipeline.optimisation import ParameterLayout
 from pipeline.segmentation import SegmentationConfig, SurfaceModel
 from pipeline.stages import joint_optimise, sensitivity
 from pipeline.stages.runner import Listeners
+from pipeline.stages.segment import segment_all
 from pipeline.stages.state import CalibrationState
 from pipeline.transforms import from_xyz_rpy
 from tests.pipeline.stages.test_global_align import _after_stage_3
@@ -153,3 +154,21 @@ def test_the_calibrations_own_surface_model_is_refused_as_its_alternative() -> N
             segmentation=SegmentationConfig(surface_model="quadric"),
             observability=ObservabilityConfig(surface_sensitivity_model="quadric"),
         )
+
+
+def test_the_quadric_alternative_comes_from_the_beam_quadrics_own_fit() -> None:
+    state = _after_stage_3()
+    config = PipelineConfig()
+    other = config.model_copy(
+        update={"segmentation": config.segmentation.model_copy(update={"surface_model": "quadric"})}
+    )
+    shared = sensitivity.refitted_segments(state, config, other)
+    again = segment_all(state, other)
+    assert state.segments is not None
+    for shared_row, again_row, own_row in zip(shared, again, state.segments, strict=True):
+        for kept, fitted, own in zip(shared_row, again_row, own_row, strict=True):
+            np.testing.assert_array_equal(kept.object_points, fitted.object_points)
+            np.testing.assert_array_equal(kept.object_normals, fitted.object_normals)
+            assert len(own.object_points) == 0 or not np.array_equal(
+                own.object_points, kept.object_points
+            )
