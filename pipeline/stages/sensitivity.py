@@ -66,10 +66,7 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     if not change:
         return StageOutcome(state, {"enabled": False}, "not measured (off)")
     optimised = required(state.optimised, "optimisation")
-    other = config.model_copy(
-        update={"segmentation": config.segmentation.model_copy(update=change)}
-    )
-    refitted = dataclasses.replace(state, segments=refitted_segments(state, config, other))
+    refitted = dataclasses.replace(state, segments=refitted_segments(state, config, change))
     moved = optimise_from(refitted, config, Listeners(), (state.T_G_ref, state.T_ref_lidar), 1)
     shift = shift_vector(
         optimised.layout, state.T_G_ref, state.T_ref_lidar, moved.T_G_ref, moved.T_ref_lidar
@@ -95,22 +92,24 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
 
 
 def refitted_segments(
-    state: CalibrationState, config: PipelineConfig, other: PipelineConfig
+    state: CalibrationState, config: PipelineConfig, change: dict[str, int | str]
 ) -> PerCloud[Segmentation]:
-    """`state`'s clouds segmented with `other`'s surfaces. Where `other` only swaps the beam
+    """`state`'s clouds segmented with `change` (`surface_change`) made to `config`'s
+    segmentation. Where it only swaps the beam
     quadric (one pass, no debias, smoothed objects) for the quadric, the beam quadric's fit
     already placed the points on the quadric on the way (`Segmentation.quadric_object_points`,
     the same normals and points kept; None where a cloud had too few points for a quadric,
     whose plane fit both models share): no second fit. Otherwise segmented again."""
     own = config.segmentation
     shared_fit = (
-        surface_change(config) == {"surface_model": "quadric"}
+        change == {"surface_model": "quadric"}
         and own.surface_model == "beam_quadric"
         and own.surface_passes == 1
         and own.surface_debias == "none"
         and own.smooth_objects
     )
     if not shared_fit:
+        other = config.model_copy(update={"segmentation": own.model_copy(update=change)})
         return segment_all(state, other)
     return tuple(
         tuple(

@@ -162,7 +162,7 @@ def test_the_quadric_alternative_comes_from_the_beam_quadrics_own_fit() -> None:
     other = config.model_copy(
         update={"segmentation": config.segmentation.model_copy(update={"surface_model": "quadric"})}
     )
-    shared = sensitivity.refitted_segments(state, config, other)
+    shared = sensitivity.refitted_segments(state, config, {"surface_model": "quadric"})
     again = segment_all(state, other)
     assert state.segments is not None
     for shared_row, again_row, own_row in zip(shared, again, state.segments, strict=True):
