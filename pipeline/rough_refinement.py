@@ -63,6 +63,9 @@ class RoughRefinementResult:
     residual_final: PlaneResiduals
     observations: int
     seconds: float
+    noise: PlaneResiduals | None = None
+    """The spread of one floor observation about the common floor after the fit (`floor_noise`);
+    None where the fit leaves no redundancy to measure it."""
 
 
 def floor_dof_basis(
@@ -255,6 +258,7 @@ def refine_with_floor(
             converged = True
             break
     tilt, offset, _ = _residuals(observations, T_G_ref, T_ref_lidar, *floor_G)
+    n_stops, n_lidars = len(T_G_ref), len(T_ref_lidar)
     return RoughRefinementResult(
         T_G_ref=T_G_ref,
         T_ref_lidar=T_ref_lidar,
@@ -265,4 +269,26 @@ def refine_with_floor(
         residual_final=_summary(tilt, offset),
         observations=len(observations),
         seconds=time.perf_counter() - started,
+        noise=floor_noise(tilt, offset, _parameter_count(n_stops, n_lidars)),
     )
+
+
+def floor_noise(
+    tilt: NDArray[np.float64], offset: NDArray[np.float64], parameters: int
+) -> PlaneResiduals | None:
+    """How far one LiDAR's floor at one stop lies from the common floor once the poses are fitted:
+    per tilt component and for the offset, a robust standard deviation of the residuals `tilt`
+    (K, 2, rad) and `offset` (K,, m) (1.4826 times their median absolute value: a box top taken
+    for the floor does not count), scaled by sqrt(rows / (rows - parameters)) for what the fit
+    absorbed. It holds what makes two LiDARs' floors disagree at one stop: plane-fit noise, and
+    on a real floor its waves and joints under each LiDAR's view. None when the rows do not
+    exceed the parameters or the residuals do not spread at all (noiseless planes)."""
+    rows = 3 * len(offset)
+    if rows <= parameters:
+        return None
+    inflation = float(np.sqrt(rows / (rows - parameters)))
+    tilt_rad = 1.4826 * float(np.median(np.abs(tilt))) * inflation
+    offset_m = 1.4826 * float(np.median(np.abs(offset))) * inflation
+    if tilt_rad <= 0.0 or offset_m <= 0.0:
+        return None
+    return PlaneResiduals(tilt_deg=float(np.degrees(tilt_rad)), offset_m=offset_m)

@@ -12,6 +12,11 @@ ResidualKind = Literal["point_to_point", "point_to_plane"]
 RobustLoss = Literal["cauchy", "geman_mcclure", "huber", "none"]
 
 
+FALLBACK_FLOOR_SIGMA = (0.02, 0.001)
+"""Floor terms' tilt (deg) and offset (m) standard deviations where they are to be measured and
+stage 3 leaves nothing to measure them by."""
+
+
 class OptimisationConfig(BaseModel):
     """The joint optimisation; lengths in metres, angles in degrees."""
 
@@ -94,8 +99,20 @@ class OptimisationConfig(BaseModel):
         "(seed 1032, 17.6 mm) and is worse with two LiDARs (docs/method.md)",
     )
     floor_terms: bool = True
-    floor_normal_sigma_deg: float = Field(default=0.02, gt=0)
-    floor_offset_sigma_m: float = Field(default=0.001, gt=0)
+    floor_normal_sigma_deg: float | None = Field(
+        default=0.02,
+        gt=0,
+        description="standard deviation of a floor term's tilt, per axis; None: measured, the "
+        "spread of stage 3's floor residuals (`rough_refinement.floor_noise`: how far one "
+        "LiDAR's floor at one stop lies from the common floor), or "
+        f"{FALLBACK_FLOOR_SIGMA[0]} deg where stage 3 leaves nothing to measure it by",
+    )
+    floor_offset_sigma_m: float | None = Field(
+        default=0.001,
+        gt=0,
+        description="standard deviation of a floor term's offset; None: measured, as the tilt's "
+        f"(or {FALLBACK_FLOOR_SIGMA[1]} m)",
+    )
     self_neighbours: int = Field(
         default=4,
         ge=1,

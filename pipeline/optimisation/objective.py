@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.geometry import Plane
-from pipeline.optimisation.config import OptimisationConfig
+from pipeline.optimisation.config import FALLBACK_FLOOR_SIGMA, OptimisationConfig
 from pipeline.optimisation.layout import ParameterLayout
 from pipeline.rough_refinement import PlaneObservation, plane_observations
 from pipeline.surfaces import local_planes, orient_towards_origin
@@ -125,10 +125,14 @@ class JointObjective:
 
     @property
     def floor_sigma(self) -> NDArray[np.float64]:
-        """Standard deviations of a floor residual: tilt (2, rad) and offset (m)."""
+        """Standard deviations of a floor residual: tilt (2, rad) and offset (m). A sigma left
+        to be measured that nobody measured (`pipeline.stages.joint_optimise` measures them) is
+        `FALLBACK_FLOOR_SIGMA`'s."""
+        tilt_deg = self.config.floor_normal_sigma_deg
+        offset_m = self.config.floor_offset_sigma_m
         return np.array(
-            [np.radians(self.config.floor_normal_sigma_deg)] * 2
-            + [self.config.floor_offset_sigma_m]
+            [np.radians(FALLBACK_FLOOR_SIGMA[0] if tilt_deg is None else tilt_deg)] * 2
+            + [FALLBACK_FLOOR_SIGMA[1] if offset_m is None else offset_m]
         )
 
     def place(self, T_G_ref: NDArray[np.float64], T_ref_lidar: NDArray[np.float64]) -> PlacedClouds:

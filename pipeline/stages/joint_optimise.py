@@ -21,6 +21,7 @@ from pipeline.metric import (
     metric_of,
 )
 from pipeline.optimisation import OptimisationResult, optimise
+from pipeline.optimisation.config import FALLBACK_FLOOR_SIGMA, OptimisationConfig
 from pipeline.optimisation.solver import evaluate_at
 from pipeline.stages.runner import IterationProgress, Listeners, StageOutcome
 from pipeline.stages.state import CalibrationState, Detail, required
@@ -125,7 +126,7 @@ def optimise_from(
         state.objects_in_lidar(),
         T_G_ref,
         T_ref_lidar,
-        config.optimisation,
+        stage4_config(state, config),
         **_floors_and_normals(state),
         on_iteration=None
         if on_iteration is None
@@ -143,9 +144,26 @@ def evaluate_solution(state: CalibrationState, config: PipelineConfig) -> Optimi
         state.objects_in_lidar(),
         state.T_G_ref,
         state.T_ref_lidar,
-        config.optimisation,
+        stage4_config(state, config),
         kernel_scale_m=optimised.kernel_scale_m,
         **_floors_and_normals(state),
+    )
+
+
+def stage4_config(state: CalibrationState, config: PipelineConfig) -> OptimisationConfig:
+    """`config.optimisation` with the floor terms' sigmas it leaves to be measured (None) taken
+    from stage 3's floor residuals (`RoughRefinementResult.noise`), or `FALLBACK_FLOOR_SIGMA`
+    where stage 3 did not run or left nothing to measure them by."""
+    options = config.optimisation
+    noise = state.floor_refinement.noise if state.floor_refinement is not None else None
+    tilt_deg, offset_m = (
+        (noise.tilt_deg, noise.offset_m) if noise is not None else FALLBACK_FLOOR_SIGMA
+    )
+    return options.model_copy(
+        update={
+            "floor_normal_sigma_deg": options.floor_normal_sigma_deg or tilt_deg,
+            "floor_offset_sigma_m": options.floor_offset_sigma_m or offset_m,
+        }
     )
 
 

@@ -145,6 +145,7 @@ CONFIG_METHODS = (
     "beam_fit",
     "fine_cauchy",
     "every_lidar",
+    "floor_measured",
     "global_alignment",
     "kernel_30mm",
     "kernel_sigmas",
@@ -202,6 +203,9 @@ def method_config(method: str) -> PipelineConfig:
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method == "every_lidar":
         data["optimisation"]["cross_pairs"] = "every_lidar"
+    elif method == "floor_measured":
+        data["optimisation"]["floor_normal_sigma_deg"] = None
+        data["optimisation"]["floor_offset_sigma_m"] = None
     elif method != "proposed":
         raise SystemExit(f"unknown method {method!r}; choose from {CONFIG_METHODS}")
     return config_from_mapping(data)

@@ -3,7 +3,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import BadInputError
-from pipeline.rough_refinement import RoughRefinementConfig, refine_with_floor
+from pipeline.rough_refinement import RoughRefinementConfig, floor_noise, refine_with_floor
 from tests.pipeline.calibration_data import (
     box_prepared,
     box_problem,
@@ -50,6 +50,27 @@ def test_roll_pitch_and_height_of_every_lidar_and_stop_come_from_the_floor() -> 
         assert tilt < 0.05 and height < 0.003
     assert result.residual_final.tilt_deg < 0.05
     assert result.residual_final.offset_m < 0.002
+    # 32 floors, 16 stops and 2 LiDARs: 96 rows against 48 parameters leave the floors' spread.
+    assert result.noise is not None
+    assert 0 < result.noise.tilt_deg < 0.05 and 0 < result.noise.offset_m < 0.002
+
+
+def test_floor_noise_is_the_residuals_robust_spread_corrected_for_the_fit() -> None:
+    """Residuals of known spread come back as that spread, inflated by sqrt(rows / (rows - P))
+    for what the fit absorbed; a box top taken for the floor (a gross residual) does not move
+    it; no redundancy, or no spread at all, measures nothing."""
+    rng = np.random.default_rng(3)
+    k = 4000
+    tilt = rng.normal(0.0, np.radians(0.01), (k, 2))
+    offset = rng.normal(0.0, 0.0004, k)
+    offset[:40] = 0.3
+    noise = floor_noise(tilt, offset, parameters=3 * k // 2)
+    assert noise is not None
+    inflation = np.sqrt(2.0)  # 3k rows, 1.5k parameters
+    assert noise.tilt_deg == pytest.approx(0.01 * inflation, rel=0.05)
+    assert noise.offset_m == pytest.approx(0.0004 * inflation, rel=0.05)
+    assert floor_noise(tilt[:10], offset[:10], parameters=30) is None
+    assert floor_noise(np.zeros((10, 2)), np.zeros(10), parameters=3) is None
 
 
 def test_no_floor_anywhere_is_bad_input() -> None:

@@ -3,6 +3,7 @@ import dataclasses
 import numpy as np
 
 from pipeline.config import PipelineConfig
+from pipeline.optimisation.config import FALLBACK_FLOOR_SIGMA
 from pipeline.stages import joint_optimise
 from pipeline.stages.runner import Listeners
 from pipeline.transforms import pose_difference
@@ -79,3 +80,21 @@ def test_the_metric_that_chose_between_two_starts_is_the_one_the_metric_stage_re
     assert again.value == optimised.metric_final.value
     single = joint_optimise.run(near, config, Listeners()).state
     assert single.metric_final is None
+
+
+def test_floor_sigmas_left_to_be_measured_come_from_stage_3s_floor_residuals() -> None:
+    """None takes stage 3's measured spread; a value set is kept; without stage 3 the fallback."""
+    state = _after_stage_3()
+    assert state.floor_refinement is not None and state.floor_refinement.noise is not None
+    noise = state.floor_refinement.noise
+    measured = PipelineConfig.model_validate(
+        {"optimisation": {"floor_normal_sigma_deg": None, "floor_offset_sigma_m": None}}
+    )
+    options = joint_optimise.stage4_config(state, measured)
+    assert options.floor_normal_sigma_deg == noise.tilt_deg
+    assert options.floor_offset_sigma_m == noise.offset_m
+    fixed = PipelineConfig()
+    assert joint_optimise.stage4_config(state, fixed) == fixed.optimisation
+    without_stage_3 = dataclasses.replace(state, floor_refinement=None)
+    fallback = joint_optimise.stage4_config(without_stage_3, measured)
+    assert (fallback.floor_normal_sigma_deg, fallback.floor_offset_sigma_m) == FALLBACK_FLOOR_SIGMA
