@@ -43,7 +43,9 @@ class RoughRefinementConfig(BaseModel):
 
 @dataclass(frozen=True)
 class PlaneResiduals:
-    """RMS over the used plane observations: tilt (deg) and offset (m) against the common floor."""
+    """Floor residuals against the common floor: tilt (deg) and offset (m). As `residual_*` the
+    RMS over the used plane observations; as `noise` one observation's robust spread per tilt
+    axis and for the offset (`floor_noise`)."""
 
     tilt_deg: float
     offset_m: float
