@@ -260,7 +260,6 @@ def refine_with_floor(
             converged = True
             break
     tilt, offset, _ = _residuals(observations, T_G_ref, T_ref_lidar, *floor_G)
-    n_stops, n_lidars = len(T_G_ref), len(T_ref_lidar)
     return RoughRefinementResult(
         T_G_ref=T_G_ref,
         T_ref_lidar=T_ref_lidar,
@@ -271,7 +270,7 @@ def refine_with_floor(
         residual_final=_summary(tilt, offset),
         observations=len(observations),
         seconds=time.perf_counter() - started,
-        noise=floor_noise(tilt, offset, _parameter_count(n_stops, n_lidars)),
+        noise=floor_noise(tilt, offset, _parameter_count(len(T_G_ref), len(T_ref_lidar))),
     )
 
 

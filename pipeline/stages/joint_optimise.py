@@ -159,11 +159,12 @@ def stage4_config(state: CalibrationState, config: PipelineConfig) -> Optimisati
     tilt_deg, offset_m = (
         (noise.tilt_deg, noise.offset_m) if noise is not None else FALLBACK_FLOOR_SIGMA
     )
+    if options.floor_normal_sigma_deg is not None:
+        tilt_deg = options.floor_normal_sigma_deg
+    if options.floor_offset_sigma_m is not None:
+        offset_m = options.floor_offset_sigma_m
     return options.model_copy(
-        update={
-            "floor_normal_sigma_deg": options.floor_normal_sigma_deg or tilt_deg,
-            "floor_offset_sigma_m": options.floor_offset_sigma_m or offset_m,
-        }
+        update={"floor_normal_sigma_deg": tilt_deg, "floor_offset_sigma_m": offset_m}
     )
 
 
