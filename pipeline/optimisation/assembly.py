@@ -15,6 +15,7 @@ from pipeline.optimisation.residuals import (
     point_residuals,
     robust_weight_and_cost,
 )
+from pipeline.optimisation.stop_prior import stop_prior_terms
 
 NormalEquations = tuple[NDArray[np.float64], NDArray[np.float64], float, int]
 """`(H (P, P), b (P,), weighted squared residual sum, number of residual rows)`."""
@@ -59,6 +60,12 @@ def normal_equations(
         b += np.einsum("kri,kr->i", floor_jac, floor_residual)
         chi2 += float(np.sum(floor_residual**2))
         count += floor_residual.size
+    if objective.stop_anchor is not None and with_floor and floor_stop is None:
+        prior_residual, prior_jac = stop_prior_terms(
+            layout, objective.stop_anchor, T_G_ref, objective.stop_sigma
+        )
+        H += np.einsum("kri,krj->ij", prior_jac, prior_jac)
+        b += np.einsum("kri,kr->i", prior_jac, prior_residual)
     return H, b, chi2, count
 
 

@@ -88,6 +88,7 @@ class JointObjective:
     reference_normals: Points
     floor: tuple[PlaneObservation, ...]
     floor_G: Plane | None
+    stop_anchor: NDArray[np.float64] | None = None
 
     @staticmethod
     def build(
@@ -97,6 +98,7 @@ class JointObjective:
         n_stops: int,
         config: OptimisationConfig,
         normals: Sequence[Sequence[Points]] | None = None,
+        stop_anchor: NDArray[np.float64] | None = None,
     ) -> JointObjective:
         """The objective over `objects[lidar][stop]` (see `optimise` for the arguments)."""
         parts, kept = _sampled(objects, config)
@@ -121,6 +123,7 @@ class JointObjective:
             reference_normals=reference_normals,
             floor=floor,
             floor_G=floor_G,
+            stop_anchor=None if config.stop_prior_sigma_m is None else stop_anchor,
         )
 
     @property
@@ -133,6 +136,14 @@ class JointObjective:
         return np.array(
             [np.radians(FALLBACK_FLOOR_SIGMA[0] if tilt_deg is None else tilt_deg)] * 2
             + [FALLBACK_FLOOR_SIGMA[1] if offset_m is None else offset_m]
+        )
+
+    @property
+    def stop_sigma(self) -> tuple[float, float]:
+        """The stop prior's standard deviations: position (m) and rotation (rad)."""
+        return (
+            float(self.config.stop_prior_sigma_m or 0.0),
+            float(np.radians(self.config.stop_prior_sigma_deg)),
         )
 
     def place(self, T_G_ref: NDArray[np.float64], T_ref_lidar: NDArray[np.float64]) -> PlacedClouds:

@@ -19,6 +19,7 @@ from pipeline.geometry import adjoint, hat, plane_in_parent, tangent_basis
 from pipeline.optimisation.association import Pairs
 from pipeline.optimisation.config import ResidualKind, RobustLoss
 from pipeline.optimisation.objective import JointObjective, PlacedClouds
+from pipeline.optimisation.stop_prior import stop_prior_terms
 from pipeline.transforms import Points
 
 
@@ -200,4 +201,10 @@ def cost(
     if objective.floor:
         floor_residual, _ = floor_terms(objective, T_G_ref, T_ref_lidar, jacobians=False)
         floor_cost = 0.5 * float(np.sum(floor_residual**2))
-    return float(np.sum(point_cost)) / config.point_sigma_m**2 + floor_cost
+    prior_cost = 0.0
+    if objective.stop_anchor is not None:
+        prior_residual, _ = stop_prior_terms(
+            objective.layout, objective.stop_anchor, T_G_ref, objective.stop_sigma
+        )
+        prior_cost = 0.5 * float(np.sum(prior_residual**2))
+    return float(np.sum(point_cost)) / config.point_sigma_m**2 + floor_cost + prior_cost

@@ -51,7 +51,7 @@ def optimise(
     for `observability.range_bias: estimated`); without it they are empty (0 LiDARs' worth).
     """
     started = time.perf_counter()
-    phases = _phases(objects, planes, floor_G, len(T_G_ref), config, normals)
+    phases = _phases(objects, planes, floor_G, T_G_ref, config, normals)
     run = _Run.start(T_G_ref, T_ref_lidar, config, config.kernel_scale_min_m)
     for phase, objective in enumerate(phases):
         _iterate(run, objective, config, last=phase == len(phases) - 1, on_iteration=on_iteration)
@@ -62,7 +62,7 @@ def _phases(
     objects: Sequence[Sequence[Points]],
     planes: Sequence[Sequence[Plane | None]] | None,
     floor_G: Plane | None,
-    n_stops: int,
+    start_G_ref: NDArray[np.float64],
     config: OptimisationConfig,
     normals: Sequence[Sequence[Points]] | None,
     *,
@@ -70,14 +70,18 @@ def _phases(
 ) -> list[JointObjective]:
     """The objective of each phase: a coarse one on `coarse_points_per_cloud` points when that is
     fewer than the final phase's, then the final one (normal gate `fine_max_normal_angle_deg`, loss
-    `fine_robust_loss`); `final_only`: the final one alone."""
+    `fine_robust_loss`); `final_only`: the final one alone. The stops' prior (where the config
+    sets one) holds them at `start_G_ref`."""
+    n_stops = len(start_G_ref)
     fine_config = config.model_copy(
         update={
             "max_normal_angle_deg": config.fine_max_normal_angle_deg,
             "robust_loss": config.fine_robust_loss or config.robust_loss,
         }
     )
-    phases = [JointObjective.build(objects, planes, floor_G, n_stops, fine_config, normals)]
+    phases = [
+        JointObjective.build(objects, planes, floor_G, n_stops, fine_config, normals, start_G_ref)
+    ]
     coarse_cap = config.coarse_points_per_cloud
     if (
         not final_only
@@ -86,7 +90,10 @@ def _phases(
     ):
         coarse_config = config.model_copy(update={"max_points_per_cloud": coarse_cap})
         phases.insert(
-            0, JointObjective.build(objects, planes, floor_G, n_stops, coarse_config, normals)
+            0,
+            JointObjective.build(
+                objects, planes, floor_G, n_stops, coarse_config, normals, start_G_ref
+            ),
         )
     return phases
 
@@ -101,13 +108,19 @@ def evaluate_at(
     planes: Sequence[Sequence[Plane | None]] | None = None,
     floor_G: Plane | None = None,
     normals: Sequence[Sequence[Points]] | None = None,
+    stop_anchor: NDArray[np.float64] | None = None,
 ) -> OptimisationResult:
     """What `optimise` would return at these poses without moving them (no iterations): the
     final phase's associations and normal equations there, the robust kernel at
     `kernel_scale_m`. Given a solution's own `kernel_scale_m`, it compares other clouds (the same
-    scene segmented otherwise) with that solution's terms, term for term."""
+    scene segmented otherwise) with that solution's terms, term for term. `stop_anchor`: where
+    the stops' prior holds them (the solution's own start, to reproduce its information to the
+    bit); None: at `T_G_ref`, which differs from the start only in the prior's rotation
+    Jacobian (the inverse left Jacobian at the stop's turn since the start, degrees at most,
+    against a prior of 30 deg)."""
     started = time.perf_counter()
-    (objective,) = _phases(objects, planes, floor_G, len(T_G_ref), config, normals, final_only=True)
+    anchor = T_G_ref if stop_anchor is None else stop_anchor
+    (objective,) = _phases(objects, planes, floor_G, anchor, config, normals, final_only=True)
     run = _Run.start(T_G_ref, T_ref_lidar, config, kernel_scale_m)
     return _result(objective, run, started, range_bias=False)
 
@@ -154,8 +167,11 @@ def _iterate(
 ) -> None:
     """One phase's steps, each with fresh associations, until the poses stop moving or the
     iterations run out; `run` is updated in place."""
-    # The coarse phase only has to get close: it stops at ten times the tolerance.
-    tolerance = 1.0 if last else 10.0
+    tolerance = (
+        (config.translation_tolerance_m, config.rotation_tolerance_deg)
+        if last
+        else (config.coarse_translation_tolerance_m, config.coarse_rotation_tolerance_deg)
+    )
     run.converged = False
     placed = objective.place(run.stops, run.lidars)
     pairs = associate(objective, placed)
@@ -177,9 +193,7 @@ def _iterate(
         if on_iteration is not None:
             on_iteration(run.iteration)
         if moved is None or (
-            moved[0] < tolerance * config.translation_tolerance_m
-            and moved[1] < tolerance * config.rotation_tolerance_deg
-            and (not last or run.scale <= floor)
+            moved[0] < tolerance[0] and moved[1] < tolerance[1] and (not last or run.scale <= floor)
         ):
             run.converged = True
             break
@@ -285,7 +299,8 @@ def lm_step(
     damping: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[float, float] | None, float]:
     """One Levenberg-Marquardt step with fixed associations: the new poses, the largest motion
-    (m, deg) of any pose (None when no step lowered the cost) and the new damping."""
+    (m, deg) of the poses convergence is judged on (`OptimisationConfig.converge_on`; None when
+    no step lowered the cost) and the new damping."""
     layout = objective.layout
     H, b, _, _ = normal_equations(objective, pairs, stops, lidars, scale)
     before = cost(objective, pairs, stops, lidars, scale)
@@ -297,9 +312,10 @@ def lm_step(
         step = np.asarray(-np.linalg.solve(A, b), dtype=np.float64)
         trial_stops, trial_lidars = apply_step(step, layout, stops, lidars)
         if cost(objective, pairs, trial_stops, trial_lidars, scale) <= before:
-            stop_motion = _largest_motion(stops, trial_stops)
-            lidar_motion = _largest_motion(lidars, trial_lidars)
-            moved = (max(stop_motion[0], lidar_motion[0]), max(stop_motion[1], lidar_motion[1]))
+            moved = _largest_motion(lidars, trial_lidars)
+            if objective.config.converge_on == "all_poses" or layout.n_lidars == 1:
+                stop_motion = _largest_motion(stops, trial_stops)
+                moved = (max(stop_motion[0], moved[0]), max(stop_motion[1], moved[1]))
             return trial_stops, trial_lidars, moved, max(damping / 3.0, 1e-9)
         damping = max(damping * 4.0, 1e-6)
     return stops, lidars, None, damping

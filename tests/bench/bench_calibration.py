@@ -146,6 +146,7 @@ CONFIG_METHODS = (
     "fine_cauchy",
     "every_lidar",
     "floor_measured",
+    "extrinsic_convergence",
     "global_alignment",
     "kernel_30mm",
     "kernel_sigmas",
@@ -203,6 +204,13 @@ def method_config(method: str) -> PipelineConfig:
         data["optimisation"]["fine_robust_loss"] = "cauchy"
     elif method == "every_lidar":
         data["optimisation"]["cross_pairs"] = "every_lidar"
+    elif method == "extrinsic_convergence":
+        data["optimisation"].update(
+            converge_on="extrinsics",
+            stop_prior_sigma_m=1.0,
+            translation_tolerance_m=1e-5,
+            rotation_tolerance_deg=1e-4,
+        )
     elif method == "floor_measured":
         data["optimisation"]["floor_normal_sigma_deg"] = None
         data["optimisation"]["floor_offset_sigma_m"] = None

@@ -4,6 +4,7 @@ import pytest
 from pipeline.optimisation import OptimisationConfig, ResidualKind
 from pipeline.optimisation.assembly import block_contributions, normal_equations
 from pipeline.optimisation.association import associate
+from pipeline.optimisation.layout import ParameterLayout
 from pipeline.optimisation.objective import JointObjective
 from pipeline.optimisation.residuals import cost
 from pipeline.optimisation.solver import apply_step
@@ -12,16 +13,28 @@ from tests.pipeline.optimisation.inputs import stage_inputs
 
 @pytest.mark.parametrize("residual", ["point_to_plane", "point_to_point"])
 @pytest.mark.parametrize("every_lidar", [False, True])
-def test_normal_equations_hold_the_cost_gradient(residual: ResidualKind, every_lidar: bool) -> None:
+@pytest.mark.parametrize("stop_prior", [False, True])
+def test_normal_equations_hold_the_cost_gradient(
+    residual: ResidualKind, every_lidar: bool, stop_prior: bool
+) -> None:
     inputs = stage_inputs()
     rough = inputs.rough
     config = OptimisationConfig(
-        residual=residual, max_points_per_cloud=60, lidar_self_consistency=every_lidar
-    )
-    objective = JointObjective.build(
-        inputs.objects, inputs.planes, rough.floor_G, len(rough.T_G_ref), config, inputs.normals
+        residual=residual,
+        max_points_per_cloud=60,
+        lidar_self_consistency=every_lidar,
+        stop_prior_sigma_m=0.05,
+        stop_prior_sigma_deg=2.0,
     )
     stops, lidars, scale = rough.T_G_ref, rough.T_ref_lidar, 0.05
+    # The prior's anchor off the poses, so that its terms pull.
+    size = 6 * (len(stops) - 1 + len(lidars) - 1)
+    twist = np.random.default_rng(0).normal(scale=0.03, size=size)
+    layout = ParameterLayout(len(stops), len(lidars))
+    anchor = apply_step(twist, layout, stops, lidars)[0] if stop_prior else None
+    objective = JointObjective.build(
+        inputs.objects, inputs.planes, rough.floor_G, len(stops), config, inputs.normals, anchor
+    )
     pairs = associate(objective, objective.place(stops, lidars))
     _, gradient, _, _ = normal_equations(objective, pairs, stops, lidars, scale)
     numeric = np.zeros_like(gradient)

@@ -167,6 +167,7 @@ def test_evaluating_a_solution_where_it_ended_gives_its_own_terms() -> None:
             planes=inputs.planes,
             floor_G=inputs.rough.floor_G,
             normals=inputs.normals,
+            stop_anchor=inputs.rough.T_G_ref,
         )
 
     again = evaluated(inputs.objects)
