@@ -62,10 +62,12 @@ def normal_equations(
         count += floor_residual.size
     if objective.stop_anchor is not None and with_floor and floor_stop is None:
         prior_residual, prior_jac = stop_prior_terms(
-            layout, objective.stop_anchor, T_G_ref, objective.stop_sigma
+            objective.stop_anchor, T_G_ref, objective.stop_sigma
         )
-        H += np.einsum("kri,krj->ij", prior_jac, prior_jac)
-        b += np.einsum("kri,kr->i", prior_jac, prior_residual)
+        for j in range(1, layout.n_stops):
+            c = layout.stop(j)
+            H[c : c + 6, c : c + 6] += prior_jac[j - 1].T @ prior_jac[j - 1]
+            b[c : c + 6] += prior_jac[j - 1].T @ prior_residual[j - 1]
     return H, b, chi2, count
 
 

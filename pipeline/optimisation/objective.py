@@ -140,11 +140,12 @@ class JointObjective:
 
     @property
     def stop_sigma(self) -> tuple[float, float]:
-        """The stop prior's standard deviations: position (m) and rotation (rad)."""
-        return (
-            float(self.config.stop_prior_sigma_m or 0.0),
-            float(np.radians(self.config.stop_prior_sigma_deg)),
-        )
+        """The stop prior's standard deviations: position (m) and rotation (rad); only where
+        the config sets one (`stop_anchor` is not None)."""
+        sigma_m = self.config.stop_prior_sigma_m
+        if sigma_m is None:
+            raise ValueError("optimisation.stop_prior_sigma_m is null: there is no stop prior")
+        return sigma_m, float(np.radians(self.config.stop_prior_sigma_deg))
 
     def place(self, T_G_ref: NDArray[np.float64], T_ref_lidar: NDArray[np.float64]) -> PlacedClouds:
         """Every cloud and its normals mapped by the poses: `T_G_ref` (J, 4, 4) per stop and

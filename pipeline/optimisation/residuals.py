@@ -204,7 +204,7 @@ def cost(
     prior_cost = 0.0
     if objective.stop_anchor is not None:
         prior_residual, _ = stop_prior_terms(
-            objective.layout, objective.stop_anchor, T_G_ref, objective.stop_sigma
+            objective.stop_anchor, T_G_ref, objective.stop_sigma, jacobians=False
         )
         prior_cost = 0.5 * float(np.sum(prior_residual**2))
     return float(np.sum(point_cost)) / config.point_sigma_m**2 + floor_cost + prior_cost

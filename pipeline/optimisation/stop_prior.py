@@ -15,31 +15,32 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from pipeline.geometry import hat
-from pipeline.optimisation.layout import ParameterLayout
 
 
 def stop_prior_terms(
-    layout: ParameterLayout,
     anchor_G_ref: NDArray[np.float64],
     T_G_ref: NDArray[np.float64],
     sigma: tuple[float, float],
+    *,
+    jacobians: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Whitened residuals (J - 1, 6) and their Jacobians (J - 1, 6, P) of every free stop's pose
-    `T_G_ref[j]` against `anchor_G_ref[j]`: position difference in G (m) and rotation vector of
-    `R_j R_anchor_j^T` (rad), over `sigma` = (m, rad)."""
-    n = layout.n_stops - 1
+    """Whitened residuals (J - 1, 6) of every free stop's pose `T_G_ref[j]` (j >= 1) against
+    `anchor_G_ref[j]`: position difference in G (m) and rotation vector of `R_j R_anchor_j^T`
+    (rad), over `sigma` = (m, rad); and each one's Jacobian by that stop's own left twist
+    `[rho, phi]` (J - 1, 6, 6), the only pose it depends on (empty without `jacobians`)."""
+    n = len(T_G_ref) - 1
     residual = np.zeros((n, 6))
-    jac = np.zeros((n, 6, layout.size))
-    for row, j in enumerate(range(1, layout.n_stops)):
+    jac = np.zeros((n if jacobians else 0, 6, 6))
+    for row, j in enumerate(range(1, len(T_G_ref))):
         R, p = T_G_ref[j][:3, :3], T_G_ref[j][:3, 3]
         turn = Rotation.from_matrix(R @ anchor_G_ref[j][:3, :3].T).as_rotvec()
         residual[row, :3] = (p - anchor_G_ref[j][:3, 3]) / sigma[0]
         residual[row, 3:] = turn / sigma[1]
-        col = layout.stop(j)
-        # A left twist [rho, phi] moves p to p + phi x p + rho and turns R by phi.
-        jac[row, :3, col : col + 3] = np.eye(3) / sigma[0]
-        jac[row, :3, col + 3 : col + 6] = -hat(p) / sigma[0]
-        jac[row, 3:, col + 3 : col + 6] = _left_jacobian_inverse(turn) / sigma[1]
+        if jacobians:
+            # A left twist [rho, phi] moves p to p + phi x p + rho and turns R by phi.
+            jac[row, :3, :3] = np.eye(3) / sigma[0]
+            jac[row, :3, 3:] = -hat(p) / sigma[0]
+            jac[row, 3:, 3:] = _left_jacobian_inverse(turn) / sigma[1]
     return residual, jac
 
 
