@@ -6,10 +6,12 @@ anything else of fleetcal's (`.importlinter` checks it). `__all__` below is the 
 in and out, its own public API) and, for the root command line only, `pipeline.cli`.
 """
 
+import os
 from typing import TYPE_CHECKING
 
 from pipeline.errors import BadInputError, ConfigError, PipelineError
 from pipeline.lazy import lazy_attributes
+from pipeline.runtime import PASSIVE_OPENMP
 
 if TYPE_CHECKING:
     from pipeline.calibrate import CalibrationResult
@@ -41,6 +43,9 @@ if TYPE_CHECKING:
     from pipeline.verdict import DriftEvidence, with_drift
 
 __version__ = "0.1.0"
+
+# Before any kd-tree loads the OpenMP runtime, which reads it once (see `pipeline.runtime`).
+os.environ.setdefault(*PASSIVE_OPENMP)
 
 __all__ = [
     "FILE_NAMES",

@@ -18,6 +18,7 @@ from pipeline.config import PipelineConfig, config_hash, unknown_frame_warnings
 from pipeline.optimisation import OptimisationResult
 from pipeline.problem import CalibrationProblem
 from pipeline.rough_refinement import RoughRefinementResult
+from pipeline.runtime import tune_allocator
 from pipeline.stages import denoise_stage
 from pipeline.stages.runner import IterationProgress, Listeners, Progress, run_stages
 from pipeline.stages.sequence import STAGE_SEQUENCE, STAGES
@@ -111,6 +112,7 @@ def calibrate(
     `progress` hears of each stage as it ends, `on_iteration` of each optimisation iteration.
     """
     config = config or PipelineConfig()
+    tune_allocator()
     state, stages = run_stages(
         initial_state(problem, config.frames),
         config,

@@ -8,7 +8,7 @@ from numpy.typing import NDArray
 
 from pipeline.geometry import voxel_keys
 from pipeline.optimisation.association import Pairs
-from pipeline.optimisation.objective import JointObjective
+from pipeline.optimisation.objective import JointObjective, PlacedClouds
 from pipeline.optimisation.residuals import (
     floor_terms,
     point_jacobians,
@@ -31,14 +31,17 @@ def normal_equations(
     ideal_floor: bool = False,
     floor_stop: int | None = None,
     with_floor: bool = True,
+    placed: PlacedClouds | None = None,
 ) -> NormalEquations:
     """H = J^T W J, b = J^T W r (weights in 1/sigma^2), the weighted squared residual sum
     and the number of residual rows. `ideal_floor`: see `residuals.floor_terms`; `floor_stop`:
-    only that stop's floor terms (None: every stop's); `with_floor` False: the point pairs alone."""
+    only that stop's floor terms (None: every stop's); `with_floor` False: the point pairs alone.
+    `placed`: the clouds already placed with these poses, where the caller has them."""
     layout = objective.layout
     H = np.zeros((layout.size, layout.size))
     b = np.zeros(layout.size)
-    placed = objective.place(T_G_ref, T_ref_lidar)
+    if placed is None:
+        placed = objective.place(T_G_ref, T_ref_lidar)
     sorted_pairs, key = _grouped(objective, pairs)
     residual = point_residuals(objective.config.residual, sorted_pairs, placed)
     weight, _ = robust_weight_and_cost(

@@ -189,11 +189,15 @@ def cost(
     T_G_ref: NDArray[np.float64],
     T_ref_lidar: NDArray[np.float64],
     scale: float,
+    placed: PlacedClouds | None = None,
 ) -> float:
     """The robust cost with these poses and fixed pairs: point terms (weights in 1/sigma^2) and
-    half the whitened floor residuals' squares."""
+    half the whitened floor residuals' squares. `placed`: the clouds already placed with these
+    poses, where the caller has them."""
     config = objective.config
-    residual = point_residuals(config.residual, pairs, objective.place(T_G_ref, T_ref_lidar))
+    if placed is None:
+        placed = objective.place(T_G_ref, T_ref_lidar)
+    residual = point_residuals(config.residual, pairs, placed)
     _, point_cost = robust_weight_and_cost(
         np.linalg.norm(residual, axis=1), scale, config.robust_loss
     )

@@ -185,7 +185,7 @@ def _iterate(
             floor, config.kernel_scale_initial_m * config.kernel_scale_decay ** (run.iteration - 1)
         )
         run.stops, run.lidars, moved, run.damping = lm_step(
-            objective, pairs, run.stops, run.lidars, run.scale, run.damping
+            objective, pairs, run.stops, run.lidars, run.scale, run.damping, placed
         )
         run.history.append(run.lidars.copy())
         placed = objective.place(run.stops, run.lidars)
@@ -216,14 +216,15 @@ def _result(
     """The result at the final poses, with the final phase's associations there: the
     information matrix, the per-stop parts of it and the variance factor."""
     layout, stops, lidars = objective.layout, run.stops, run.lidars
-    pairs = associate(objective, objective.place(stops, lidars))
+    placed = objective.place(stops, lidars)
+    pairs = associate(objective, placed)
     run.errors.append(pairs.cross_error)
     H = np.zeros((layout.size, layout.size))
     gradient = np.zeros(layout.size)
     chi2, count = 0.0, 0
     if len(pairs.source) or objective.floor:
         H, gradient, chi2, count = normal_equations(
-            objective, pairs, stops, lidars, run.scale, ideal_floor=True
+            objective, pairs, stops, lidars, run.scale, ideal_floor=True, placed=placed
         )
     stop_H, stop_b = stop_contributions(objective, pairs, stops, lidars, run.scale)
     block_H, block_b = block_contributions(
@@ -237,7 +238,7 @@ def _result(
     redundancy = max(count - layout.size, 1)
     residual_rms = float("nan")
     if len(pairs.source):
-        residual = point_residuals(objective.config.residual, pairs, objective.place(stops, lidars))
+        residual = point_residuals(objective.config.residual, pairs, placed)
         residual_rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
     per_lidar = np.bincount(objective.sources.lidar[pairs.source], minlength=layout.n_lidars)
     return OptimisationResult(
@@ -297,13 +298,17 @@ def lm_step(
     lidars: NDArray[np.float64],
     scale: float,
     damping: float,
+    placed: PlacedClouds | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[float, float] | None, float]:
     """One Levenberg-Marquardt step with fixed associations: the new poses, the largest motion
     (m, deg) of the poses convergence is judged on (`OptimisationConfig.converge_on`; None when
-    no step lowered the cost) and the new damping."""
+    no step lowered the cost) and the new damping. `placed`: the clouds placed with `stops` and
+    `lidars`, where the caller has them (the pairs were found there)."""
     layout = objective.layout
-    H, b, _, _ = normal_equations(objective, pairs, stops, lidars, scale)
-    before = cost(objective, pairs, stops, lidars, scale)
+    if placed is None:
+        placed = objective.place(stops, lidars)
+    H, b, _, _ = normal_equations(objective, pairs, stops, lidars, scale, placed=placed)
+    before = cost(objective, pairs, stops, lidars, scale, placed)
     # A pose nothing constrains (no objects, no floor) keeps its value instead of a singular
     # solve; the observability stage reports it.
     floor = 1e-12 * max(float(np.trace(H)) / max(layout.size, 1), 1.0)
