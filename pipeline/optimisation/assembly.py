@@ -137,13 +137,17 @@ def stop_contributions(
     stops: NDArray[np.float64],
     lidars: NDArray[np.float64],
     scale: float,
+    placed: PlacedClouds | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per stop, the information (J, P, P) and gradient (J, P) of the residuals that touch it.
 
     A pair touches stop j when its source or its target point was seen there; a pair between two
-    stops counts for both, as leaving either out removes it.
+    stops counts for both, as leaving either out removes it. `placed`: the clouds placed with
+    these poses, where the caller has them.
     """
     layout = objective.layout
+    if placed is None:
+        placed = objective.place(stops, lidars)
     H = np.zeros((layout.n_stops, layout.size, layout.size))
     b = np.zeros((layout.n_stops, layout.size))
     source_stop = objective.sources.stop[pairs.source]
@@ -154,7 +158,7 @@ def stop_contributions(
             continue
         subset = Pairs(pairs.source[touching], pairs.target[touching], pairs.cross_error)
         H[j], b[j], _, _ = normal_equations(
-            objective, subset, stops, lidars, scale, ideal_floor=True, floor_stop=j
+            objective, subset, stops, lidars, scale, ideal_floor=True, floor_stop=j, placed=placed
         )
     return H, b
 
@@ -166,6 +170,7 @@ def block_contributions(
     lidars: NDArray[np.float64],
     scale: float,
     block_m: float,
+    placed: PlacedClouds | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per block of space, the information (B, P, P) and gradient (B, P) of the point pairs
     whose target lies in it: cubic cells of edge `block_m` in G, one per occupied cell.
@@ -173,9 +178,11 @@ def block_contributions(
     Neighbouring pairs share their surface fit, so their residuals are correlated and a
     jackknife over stops cannot see a misfit every stop repeats; leaving out a block of space
     removes a correlated patch whole. The floor terms stay in every block's complement.
+    `placed`: the clouds placed with these poses, where the caller has them.
     """
     layout = objective.layout
-    placed = objective.place(stops, lidars)
+    if placed is None:
+        placed = objective.place(stops, lidars)
     key = voxel_keys(placed.reference_G[pairs.target], block_m, "optimisation.uncertainty_block_m")
     blocks, block_of = np.unique(key, return_inverse=True)
     H = np.zeros((len(blocks), layout.size, layout.size))
@@ -186,7 +193,7 @@ def block_contributions(
         rows = order[bounds[c] : bounds[c + 1]]
         subset = Pairs(pairs.source[rows], pairs.target[rows], pairs.cross_error)
         H[c], b[c], _, _ = normal_equations(
-            objective, subset, stops, lidars, scale, with_floor=False
+            objective, subset, stops, lidars, scale, with_floor=False, placed=placed
         )
     return H, b
 

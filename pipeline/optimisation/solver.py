@@ -226,9 +226,9 @@ def _result(
         H, gradient, chi2, count = normal_equations(
             objective, pairs, stops, lidars, run.scale, ideal_floor=True, placed=placed
         )
-    stop_H, stop_b = stop_contributions(objective, pairs, stops, lidars, run.scale)
+    stop_H, stop_b = stop_contributions(objective, pairs, stops, lidars, run.scale, placed)
     block_H, block_b = block_contributions(
-        objective, pairs, stops, lidars, run.scale, objective.config.uncertainty_block_m
+        objective, pairs, stops, lidars, run.scale, objective.config.uncertainty_block_m, placed
     )
     bias_cross, bias_information, bias_gradient = (
         range_bias_terms(objective, pairs, stops, lidars, run.scale)
