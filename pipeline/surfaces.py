@@ -104,31 +104,52 @@ def local_surfaces(
     k = min(neighbours, len(points))
     _, idx = KDTree(points).query(points, k=k)
     surfaces = LocalSurfaces(points, np.zeros_like(points))
+    fit = _Fit(centre_neighbours, quadric, along_beams, normals_along_beams)
     for _ in range(max(passes, 1)):
-        surfaces = _project(
-            surfaces.projected,
-            idx,
-            centre_neighbours,
-            quadric=quadric,
-            along_beams=along_beams,
-            normals_along_beams=normals_along_beams,
-        )
+        surfaces = _project(surfaces.projected, idx, fit)
     return surfaces if passes <= 1 else dataclasses.replace(surfaces, along_normals=None)
 
 
-def _project(
-    points: Points,
-    idx: NDArray[np.integer],
-    centre_neighbours: int | None,
-    *,
-    quadric: bool,
-    along_beams: bool,
-    normals_along_beams: bool,
-) -> LocalSurfaces:
-    """One pass of `local_planes` over the neighbourhoods `idx` (N, k) of `points`."""
+ROWS_PER_CHUNK = 2048
+"""Points fitted together: their (rows, k) temporaries (1.3 MB each at k = 80) stay in the
+cache, where a whole cloud's spill to memory at every one of the fit's ~40 array operations."""
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """How each point's surface is fitted (the arguments of `local_surfaces`)."""
+
+    centre_neighbours: int | None
+    quadric: bool
+    along_beams: bool
+    normals_along_beams: bool
+
+
+def _project(cloud: Points, idx: NDArray[np.integer], fit: _Fit) -> LocalSurfaces:
+    """One pass of `local_planes` over the neighbourhoods `idx` (N, k) of the points of `cloud`
+    (N, 3), `ROWS_PER_CHUNK` points at a time (each point's fit is its own)."""
+    chunks = [
+        _project_rows(
+            cloud, slice(start, start + ROWS_PER_CHUNK), idx[start : start + ROWS_PER_CHUNK], fit
+        )
+        for start in range(0, len(cloud), ROWS_PER_CHUNK)
+    ]
+    along = [chunk.along_normals for chunk in chunks if chunk.along_normals is not None]
+    return LocalSurfaces(
+        np.concatenate([chunk.projected for chunk in chunks]),
+        np.concatenate([chunk.normals for chunk in chunks]),
+        np.concatenate(along) if len(along) == len(chunks) else None,
+    )
+
+
+def _project_rows(cloud: Points, rows: slice, idx: NDArray[np.integer], fit: _Fit) -> LocalSurfaces:
+    """`_project` for the points `cloud[rows]`, whose neighbourhoods in `cloud` are `idx`."""
+    points = cloud[rows]
     k = idx.shape[1]
+    centre_neighbours, quadric = fit.centre_neighbours, fit.quadric
+    along_beams, normals_along_beams = fit.along_beams, fit.normals_along_beams
     # One contiguous (N, k) array per axis: strided views of an (N, k, 3) gather are slower.
-    x, y, z = (points[:, axis][idx] for axis in range(3))
+    x, y, z = (cloud[:, axis][idx] for axis in range(3))
     centroid = np.column_stack([x.mean(axis=1), y.mean(axis=1), z.mean(axis=1)])
     x -= centroid[:, 0:1]
     y -= centroid[:, 1:2]
@@ -148,19 +169,19 @@ def _project(
         else smallest_eigenvectors(covariance)
     )
     if quadric and k >= 10:
-        projected, fitted = _quadric_surfaces(points, idx, normals)
+        projected, fitted = _quadric_surfaces(cloud, points, idx, normals)
         kept = normals if normals_along_beams else fitted
         if along_beams:
             # Only where the point goes: the normal from a quadric fitted along a beam has six
             # coefficients to spend on a patch seen on one or two scan lines.
             along_normals = None if normals_along_beams else projected
-            projected, _ = _quadric_surfaces(points, idx, beams)
+            projected, _ = _quadric_surfaces(cloud, points, idx, beams)
             return LocalSurfaces(projected, kept, along_normals)
         return LocalSurfaces(projected, kept)
     if centre_neighbours is not None and centre_neighbours < k:
         # pykdtree returns the neighbours nearest first.
         near = idx[:, :centre_neighbours]
-        centroid = np.column_stack([points[:, axis][near].mean(axis=1) for axis in range(3)])
+        centroid = np.column_stack([cloud[:, axis][near].mean(axis=1) for axis in range(3)])
     offset = np.einsum("ni,ni->n", normals, points - centroid)
     return LocalSurfaces(points - offset[:, None] * normals, normals)
 
@@ -177,18 +198,18 @@ def _normals_along_beams(covariance: NDArray[np.float64], beams: Points) -> Poin
 
 
 def _quadric_surfaces(
-    points: Points, idx: NDArray[np.integer], normals: Points
+    cloud: Points, points: Points, idx: NDArray[np.integer], normals: Points
 ) -> tuple[Points, Points]:
-    """Project each point onto `h = c0 + c1 a + c2 b + c3 a^2 + c4 ab + c5 b^2`, fitted by least
-    squares to its neighbours `idx` (N, k) in the frame (h along the unit `normals` (N, 3), a, b
-    across them) centred at the point, along `normals`; return the projections and the fitted
-    surface's unit normals there."""
+    """Project each point (N, 3) onto `h = c0 + c1 a + c2 b + c3 a^2 + c4 ab + c5 b^2`, fitted by
+    least squares to its neighbours `cloud[idx]` (idx (N, k)) in the frame (h along the unit
+    `normals` (N, 3), a, b across them) centred at the point, along `normals`; return the
+    projections and the fitted surface's unit normals there."""
     # Any orthonormal tangent pair will do: the full quadratic does not depend on its rotation.
     helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     u = np.cross(normals, helper)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     v = np.cross(normals, u)
-    offsets = points[idx] - points[:, None, :]  # (N, k, 3)
+    offsets = cloud[idx] - points[:, None, :]  # (N, k, 3)
     frame = np.stack([u, v, normals], axis=2)  # (N, 3, 3): columns a, b, h
     local = np.matmul(offsets, frame)  # (N, k, 3)
     a, b, h = local[:, :, 0], local[:, :, 1], local[:, :, 2]

@@ -1,5 +1,7 @@
 import numpy as np
+import pytest
 
+from pipeline import surfaces
 from pipeline.downsample import voxel_downsample
 from pipeline.surfaces import local_planes, local_surfaces, smallest_eigenvectors
 
@@ -150,3 +152,29 @@ def test_further_passes_thin_the_sheet_of_a_noisy_cylinder_without_moving_it() -
     one, four = off_surface(1), off_surface(4)
     assert four.std() < 0.6 * one.std()
     assert abs(four.mean() - one.mean()) < 0.001
+
+
+@pytest.mark.parametrize(
+    "model",
+    [
+        {"quadric": True, "along_beams": True},
+        {"quadric": True},
+        {"normals_along_beams": True, "along_beams": True, "quadric": True},
+        {},
+    ],
+)
+def test_fitting_in_chunks_of_points_changes_no_bit(
+    model: dict[str, bool], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rng = np.random.default_rng(5)
+    cloud = rng.normal(size=(500, 3)) * [1.0, 1.0, 0.02] + [2.0, 0.0, -0.5]
+    whole = local_surfaces(cloud, 30, 10, **model)
+    monkeypatch.setattr(surfaces, "ROWS_PER_CHUNK", 37)  # 14 chunks, the last of 19 points
+    chunked = local_surfaces(cloud, 30, 10, **model)
+    assert np.array_equal(chunked.projected, whole.projected)
+    assert np.array_equal(chunked.normals, whole.normals)
+    if whole.along_normals is None:
+        assert chunked.along_normals is None
+    else:
+        assert chunked.along_normals is not None
+        assert np.array_equal(chunked.along_normals, whole.along_normals)
