@@ -20,7 +20,7 @@ from pipeline.geometry import Plane
 from pipeline.problem import LidarInfo, ScanPattern
 from pipeline.segmentation import FloorFit, above_floor, fit_floor
 from pipeline.stages.runner import Listeners, StageOutcome
-from pipeline.stages.state import CalibrationState, Detail, PerCloud
+from pipeline.stages.state import CalibrationState, Detail, PerCloud, per_cloud
 from pipeline.transforms import Points
 
 
@@ -56,10 +56,13 @@ def denoise_above_floor(
 
 def fit_floors(state: CalibrationState, config: PipelineConfig) -> PerCloud[FloorFit | None]:
     """Each cloud's floor (RANSAC in the LiDAR frame around its expected up), None where none."""
-    return tuple(
-        tuple(fit_floor(cloud, up, config.segmentation) for cloud in clouds)
-        for clouds, up in zip(state.clouds_in_lidar, state.up_in_lidar, strict=True)
-    )
+
+    def fitted(at: tuple[int, int]) -> FloorFit | None:
+        lidar, stop = at
+        cloud = state.clouds_in_lidar[lidar][stop]
+        return fit_floor(cloud, state.up_in_lidar[lidar], config.segmentation)
+
+    return per_cloud(state.clouds_in_lidar, fitted)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,16 +81,24 @@ def _filter(
     config: PipelineConfig,
 ) -> _Filtered:
     """Stage 1 on the clouds of the LiDARs `frames` that have a floor; the rest all kept."""
+
+    def filtered(at: tuple[int, int]) -> DenoiseResult | None:
+        lidar, stop = at
+        frame, floor = state.lidars[lidar].frame, floors[lidar][stop]
+        if frame not in frames or floor is None:
+            return None
+        return denoise_above_floor(state.clouds_in_lidar[lidar][stop], floor[0], config, frame)
+
+    results = per_cloud(state.clouds_in_lidar, filtered)
     kept: list[tuple[KeepMask | None, ...]] = []
     judged = removed = 0
     by_frame: dict[str, tuple[int, int]] = {}
-    for lidar, clouds, row_floors in zip(state.lidars, state.clouds_in_lidar, floors, strict=True):
+    for lidar, row_results in zip(state.lidars, results, strict=True):
         row: list[KeepMask | None] = []
-        for cloud, floor in zip(clouds, row_floors, strict=True):
-            if lidar.frame not in frames or floor is None:
+        for result in row_results:
+            if result is None:
                 row.append(None)
                 continue
-            result = denoise_above_floor(cloud, floor[0], config, lidar.frame)
             judged += result.judged_points
             removed += result.removed_points
             frame_judged, frame_removed = by_frame.get(lidar.frame, (0, 0))

@@ -11,7 +11,7 @@ import numpy as np
 from pipeline.config import PipelineConfig
 from pipeline.moving_points import MovingPointsConfig, find_moving_points, scan_ids
 from pipeline.stages.runner import Listeners, StageOutcome
-from pipeline.stages.state import CalibrationState, Detail
+from pipeline.stages.state import CalibrationState, Detail, per_cloud
 from pipeline.transforms import Points
 
 
@@ -23,12 +23,16 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
     details: dict[str, Detail] = {"enabled": settings.enabled}
     judged = skipped = total = 0
     unknown = tuple(((),) * len(row) for row in state.clouds_in_lidar)
-    for lidar, row, row_sizes in zip(
-        state.lidars, state.clouds_in_lidar, state.scan_sizes or unknown, strict=True
-    ):
+    all_sizes = state.scan_sizes or unknown
+
+    def without_moving(at: tuple[int, int]) -> tuple[Points, tuple[int, ...], int | None]:
+        lidar, stop = at
+        return _without_moving(state.clouds_in_lidar[lidar][stop], all_sizes[lidar][stop], settings)
+
+    outcomes = per_cloud(state.clouds_in_lidar, without_moving)
+    for lidar, row, row_outcomes in zip(state.lidars, state.clouds_in_lidar, outcomes, strict=True):
         kept_row, sizes_row, removed = [], [], 0
-        for cloud, scan_sizes in zip(row, row_sizes, strict=True):
-            kept, kept_sizes, moving = _without_moving(cloud, scan_sizes, settings)
+        for cloud, (kept, kept_sizes, moving) in zip(row, row_outcomes, strict=True):
             kept_row.append(kept)
             sizes_row.append(kept_sizes)
             if moving is None:

@@ -8,20 +8,17 @@ import dataclasses
 from pipeline.config import PipelineConfig
 from pipeline.segmentation import Segmentation, segment_on_floor
 from pipeline.stages.runner import Listeners, StageOutcome
-from pipeline.stages.state import CalibrationState, Detail, PerCloud
+from pipeline.stages.state import CalibrationState, Detail, PerCloud, per_cloud
 
 
 def segment_all(state: CalibrationState, config: PipelineConfig) -> PerCloud[Segmentation]:
     """Every cloud segmented on the floor fitted before stage 1, per LiDAR and stop."""
 
-    def segmented(lidar: int, stop: int) -> Segmentation:
-        cloud, floor = state.filtered(lidar, stop)
+    def segmented(at: tuple[int, int]) -> Segmentation:
+        cloud, floor = state.filtered(*at)
         return segment_on_floor(cloud, config.segmentation, floor)
 
-    return tuple(
-        tuple(segmented(lidar, stop) for stop in range(len(row)))
-        for lidar, row in enumerate(state.clouds_in_lidar)
-    )
+    return per_cloud(state.clouds_in_lidar, segmented)
 
 
 def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -> StageOutcome:

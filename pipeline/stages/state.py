@@ -7,7 +7,7 @@ unknowns are the reference's pose per stop `T_G_ref` and the extrinsics relative
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TypeVar
 
@@ -19,6 +19,7 @@ from pipeline.geometry import Plane
 from pipeline.metric import MetricError, SolutionComparison
 from pipeline.observability import PoseUncertainty, SurfaceShift
 from pipeline.optimisation import OptimisationResult
+from pipeline.parallel import map_clouds
 from pipeline.problem import LidarInfo
 from pipeline.rough_refinement import RoughRefinementResult
 from pipeline.segmentation import FloorFit, Segmentation
@@ -77,6 +78,20 @@ class LidarCalibration:
 
 PerCloud = tuple[tuple[_Value, ...], ...]
 """One value per LiDAR (reference first) and stop: `x[lidar][stop]`."""
+
+
+def per_cloud(
+    clouds: PerCloud[Points], function: Callable[[tuple[int, int]], _Value]
+) -> PerCloud[_Value]:
+    """`function((lidar, stop))` for every cloud of `clouds`, spread over threads
+    (`pipeline.parallel`): each cloud's work is its own."""
+    shape = [len(row) for row in clouds]
+    flat = map_clouds(function, [(i, j) for i, n in enumerate(shape) for j in range(n)])
+    rows, start = [], 0
+    for n in shape:
+        rows.append(tuple(flat[start : start + n]))
+        start += n
+    return tuple(rows)
 
 
 @dataclass(frozen=True)

@@ -75,3 +75,20 @@ def test_clouds_whose_scans_are_unknown_are_counted_as_not_judged(enabled: bool)
     assert outcome.details["skipped_clouds"] == (non_empty if enabled else 0)
     assert outcome.details["judged_clouds"] == outcome.details["removed_points"] == 0
     assert outcome.state.clouds_in_lidar == state.clouds_in_lidar
+
+
+def test_the_thread_count_changes_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    problem, _ = simulate_problem("people", seed=0, rate_scale=0.1)
+    config = PipelineConfig()
+    state = initial_state(problem, config.frames)
+    outcomes = []
+    for threads in ("1", "3"):
+        monkeypatch.setenv("OMP_NUM_THREADS", threads)
+        outcomes.append(moving.run(state, config, Listeners()))
+    one, three = outcomes
+    assert one.details == three.details
+    assert one.state.scan_sizes == three.state.scan_sizes
+    for row_one, row_three in zip(
+        one.state.clouds_in_lidar, three.state.clouds_in_lidar, strict=True
+    ):
+        assert all(np.array_equal(a, b) for a, b in zip(row_one, row_three, strict=True))
