@@ -142,6 +142,7 @@ CONFIG_METHODS = (
     "range_bias_estimated",
     "quadric",
     "surface_k30",
+    "surface_k120",
     "beam_fit",
     "fine_cauchy",
     "every_lidar",
@@ -178,8 +179,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_model"] = "quadric"
     elif method == "beam_fit":
         data["segmentation"]["surface_model"] = "beam_fit"
-    elif method == "surface_k30":
-        data["segmentation"]["surface_neighbours"] = 30
+    elif method in ("surface_k30", "surface_k120"):
+        data["segmentation"]["surface_neighbours"] = int(method.removeprefix("surface_k"))
     elif method in ("surface_passes2", "surface_passes4"):
         data["segmentation"]["surface_passes"] = int(method[-1])
     elif method == "global_alignment":
