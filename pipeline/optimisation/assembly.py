@@ -219,14 +219,17 @@ def range_bias_terms(
     stops: NDArray[np.float64],
     lidars: NDArray[np.float64],
     scale: float,
+    placed: PlacedClouds | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The normal equations' terms of a range bias per LiDAR (beta_i: every point of LiDAR i
     moved along its ray by the same length), at fixed pairs: `J^T W dr/dbeta` (L, P) between
     the poses and each bias, `dr/dbeta^T W dr/dbeta` (L, L) among the biases, and
     `dr/dbeta^T W r` (L,), the cost's gradient by them. The floor terms are left out: they fix
-    height, roll and pitch, and a floor plane a range bias moves stays a plane."""
+    height, roll and pitch, and a floor plane a range bias moves stays a plane. `placed`: the
+    clouds placed with these poses, where the caller has them."""
     layout = objective.layout
-    placed = objective.place(stops, lidars)
+    if placed is None:
+        placed = objective.place(stops, lidars)
     sorted_pairs, key = _grouped(objective, pairs)
     residual = point_residuals(objective.config.residual, sorted_pairs, placed)
     weight, _ = robust_weight_and_cost(

@@ -231,7 +231,7 @@ def _result(
         objective, pairs, stops, lidars, run.scale, objective.config.uncertainty_block_m, placed
     )
     bias_cross, bias_information, bias_gradient = (
-        range_bias_terms(objective, pairs, stops, lidars, run.scale)
+        range_bias_terms(objective, pairs, stops, lidars, run.scale, placed)
         if range_bias
         else (np.zeros((0, layout.size)), np.zeros((0, 0)), np.zeros(0))
     )
