@@ -186,9 +186,11 @@ def run_seed(
     methods: Sequence[str],
     world: str | None = None,
     discard_recording: bool = False,
+    keep_free_bytes: int = 0,
 ) -> list[SeedResult]:
     """Synthesise (once) and calibrate one seed (in `world`) with each method not already
-    cached; with `discard_recording`, delete the recording once every method has its result."""
+    cached; with `discard_recording`, or when the cache's disk has less than `keep_free_bytes`
+    free, delete the recording once every method has its result."""
     from pipeline.calibrate import calibrate
     from pipeline.errors import PipelineError
     from pipeline.io import read_recording
@@ -242,7 +244,9 @@ def run_seed(
         partial.write_text(json.dumps(asdict(record)))
         partial.replace(path)  # atomic: a killed run leaves no half-written result
         results.append(record)
-    if discard_recording and directory.exists():
+    if directory.exists() and (
+        discard_recording or shutil.disk_usage(directory).free < keep_free_bytes
+    ):
         shutil.rmtree(directory)
     return results
 
@@ -525,7 +529,14 @@ def main(argv: Sequence[str] | None = None) -> None:
         "--discard-recordings",
         action="store_true",
         help="delete each seed's recording once all its methods have results (a full-rate "
-        "recording takes about 0.4 GB; the results stay cached, a later method synthesises again)",
+        "recording takes 0.4-0.9 GB; the results stay cached, a later method synthesises again)",
+    )
+    parser.add_argument(
+        "--keep-free-gb",
+        type=float,
+        default=20.0,
+        help="keep a recording in the cache only while its disk has this much free space, so a "
+        "long run cannot fill the disk (100 full-rate recordings take about 60 GB)",
     )
     parser.add_argument(
         "--without-checks",
@@ -559,6 +570,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                 args.methods,
                 world,
                 args.discard_recordings,
+                int(args.keep_free_gb * 1e9),
             ): seed
             for seed in seeds
             for world in worlds

@@ -138,7 +138,17 @@ def test_cached_results_are_read_back_not_recomputed(tmp_path: Path) -> None:
     assert not (tmp_path / "recordings").exists()
 
 
-def test_a_discarded_recording_goes_once_every_method_has_its_result(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("discard", "keep_free_bytes", "kept"),
+    [
+        (True, 0, False),  # asked for
+        (False, 2**62, False),  # the disk has less free than asked to keep: the cache stops growing
+        (False, 0, True),
+    ],
+)
+def test_a_recording_is_discarded_when_asked_or_when_the_disk_runs_short(
+    tmp_path: Path, discard: bool, keep_free_bytes: int, kept: bool
+) -> None:
     record = _record(42, 3.0, 0.05, True)
     path = result_path(tmp_path, 0.1, "proposed", 42)
     path.parent.mkdir(parents=True)
@@ -146,8 +156,16 @@ def test_a_discarded_recording_goes_once_every_method_has_its_result(tmp_path: P
     recording = recording_dir(tmp_path, 0.1, 42)
     recording.mkdir(parents=True)
     (recording / "left-from-an-earlier-run").write_text("x")
-    assert run_seed(tmp_path, 0.1, 42, ["proposed"], discard_recording=True) == [record]
-    assert not recording.exists()
+    results = run_seed(
+        tmp_path,
+        0.1,
+        42,
+        ["proposed"],
+        discard_recording=discard,
+        keep_free_bytes=keep_free_bytes,
+    )
+    assert results == [record]
+    assert recording.exists() == kept
 
 
 def _in_world(seed: int, world: str, mm: float, deg: float, **kw: object) -> SeedResult:
