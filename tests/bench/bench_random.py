@@ -9,7 +9,9 @@ For each seed the recording is synthesised once into `CACHE/recordings/rate-F/se
 recording left half-written is written again), then read from disk with `pipeline.io` and
 calibrated by each method, as a user's upload would be. Each (method, seed) result is kept in
 `CACHE/results/rate-F/METHOD/seed-N.json`, so an interrupted run resumes where it stopped.
-Seeds run in `--jobs` processes, each with one BLAS thread.
+Seeds run in `--jobs` processes, each with one BLAS thread. A full-rate recording takes 0.4-0.9
+GB: one stays cached only while the cache's disk keeps `--keep-free-gb` free (else it is deleted
+once its methods have results, as with `--discard-recordings`), so a long run never fills the disk.
 
 `--worlds W1,W2,...` runs every seed in each world (`random_scenario(seed, world=W)`: the same
 robot, routine, objects, errors and clocks; only the world differs), cached per world under
