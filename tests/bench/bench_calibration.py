@@ -143,6 +143,7 @@ CONFIG_METHODS = (
     "quadric",
     "surface_k30",
     "surface_k120",
+    "surface_k160",
     "beam_fit",
     "fine_cauchy",
     "every_lidar",
@@ -179,7 +180,7 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_model"] = "quadric"
     elif method == "beam_fit":
         data["segmentation"]["surface_model"] = "beam_fit"
-    elif method in ("surface_k30", "surface_k120"):
+    elif method in ("surface_k30", "surface_k120", "surface_k160"):
         data["segmentation"]["surface_neighbours"] = int(method.removeprefix("surface_k"))
     elif method in ("surface_passes2", "surface_passes4"):
         data["segmentation"]["surface_passes"] = int(method[-1])
