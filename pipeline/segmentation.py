@@ -16,12 +16,13 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
+from pykdtree.kdtree import KDTree
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.downsample import voxel_downsample
 from pipeline.geometry import Plane, pack_cells, tangent_basis, voxel_keys
-from pipeline.surface_bias import smoothing_offsets
+from pipeline.surface_bias import range_noise_from_smoothing, smoothing_offsets
 from pipeline.surfaces import LocalSurfaces, local_surfaces
 from pipeline.transforms import Points
 
@@ -156,6 +157,16 @@ class SegmentationConfig(BaseModel):
         "1010, 1015 and 1017 pass 11-21 mm off (five false passes over 1000-1019, against one "
         "with the quadric; 30-point patches) and set1-box seeds 0-4 end 9.5-17.7 mm off "
         "(1.7-2.4 with the quadric)",
+    )
+    surface_patch: Literal["fixed", "noise"] = Field(
+        default="fixed",
+        description="fixed: every patch has surface_neighbours points. noise (opt-in): "
+        "surface_neighbours is the patch at the reference range noise and point spacing (2 cm "
+        "each: a Mid-70 seen densely, voxelised at 2 cm), and each cloud's patch scales as its "
+        "own range noise over its point spacing (both measured on the cloud, "
+        "`patch_neighbours`), which keeps the tilt that noise gives a patch's normal the same: "
+        "noisier LiDARs get larger patches, sparse clouds smaller ones (a fixed count spans a "
+        "wider, more curved piece of surface there)",
     )
     surface_debias: Literal["none", "bootstrap"] = Field(
         default="none",
@@ -499,6 +510,11 @@ def _smoothed(objects: Points, config: SegmentationConfig) -> LocalSurfaces:
         )
 
     surfaces = fit(objects)
+    if config.surface_patch == "noise":
+        patch = patch_neighbours(objects, surfaces, config)
+        if patch != config.surface_neighbours:
+            config = config.model_copy(update={"surface_neighbours": patch})
+            surfaces = fit(objects)
     if config.surface_debias == "bootstrap":
         offsets = smoothing_offsets(
             objects,
@@ -511,6 +527,40 @@ def _smoothed(objects: Points, config: SegmentationConfig) -> LocalSurfaces:
         projected = surfaces.projected - offsets[:, None] * surfaces.normals
         return LocalSurfaces(projected, surfaces.normals)
     return surfaces
+
+
+REFERENCE_RANGE_NOISE_M = 0.02
+"""The range noise (one sigma) at which `surface_neighbours` is the patch (`surface_patch:
+noise`): the Mid-70's, on which the fixed patch was chosen."""
+
+PATCH_LIMITS = (10, 400)
+"""The fewest and most neighbours a `surface_patch: noise` patch may have (a quadric needs 10)."""
+
+
+def patch_neighbours(objects: Points, surfaces: LocalSurfaces, config: SegmentationConfig) -> int:
+    """The patch for `surface_patch: noise`: `surface_neighbours` scaled by the cloud's range
+    noise over `REFERENCE_RANGE_NOISE_M` and by the voxel size over its point spacing.
+
+    A plane fitted to k points of spacing s under noise sigma tilts by about sigma / (R sqrt(k))
+    over a patch of radius R = s sqrt(k / pi), i.e. as sigma / (s k): holding the tilt, k grows
+    as sigma / s. The noise is what the first fit (`surfaces`, with `surface_neighbours`) took
+    away along the beams (`range_noise_from_smoothing`); the spacing comes from the radius that
+    holds a patch, s = r_k sqrt(pi / k) (median over the points). A cloud too small or too
+    oblique to measure its noise keeps `surface_neighbours`."""
+    k = config.surface_neighbours
+    if len(objects) <= k:
+        return k
+    ranges = np.linalg.norm(surfaces.projected, axis=1, keepdims=True)
+    beams = surfaces.projected / np.maximum(ranges, 1e-12)
+    sigma = range_noise_from_smoothing(objects, surfaces.projected, surfaces.normals, beams)
+    if sigma is None or sigma <= 0.0:
+        return k
+    distances, _ = KDTree(objects).query(objects, k=k)
+    spacing = float(np.median(distances[:, -1])) * np.sqrt(np.pi / k)
+    if spacing <= 0.0:
+        return k
+    scaled = k * (sigma / REFERENCE_RANGE_NOISE_M) * (config.voxel_size_m / spacing)
+    return int(np.clip(round(scaled), *PATCH_LIMITS))
 
 
 def segment_on_floor(

@@ -144,6 +144,7 @@ CONFIG_METHODS = (
     "surface_k30",
     "surface_k120",
     "surface_k160",
+    "surface_noise",
     "beam_fit",
     "fine_cauchy",
     "every_lidar",
@@ -182,6 +183,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_model"] = "beam_fit"
     elif method in ("surface_k30", "surface_k120", "surface_k160"):
         data["segmentation"]["surface_neighbours"] = int(method.removeprefix("surface_k"))
+    elif method == "surface_noise":
+        data["segmentation"]["surface_patch"] = "noise"
     elif method in ("surface_passes2", "surface_passes4"):
         data["segmentation"]["surface_passes"] = int(method[-1])
     elif method == "global_alignment":

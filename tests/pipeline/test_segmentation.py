@@ -1,13 +1,17 @@
 import numpy as np
+import pytest
+from numpy.typing import NDArray
 
 from pipeline.segmentation import (
     SegmentationConfig,
     euclidean_clusters,
     find_floor,
     fit_floor,
+    patch_neighbours,
     segment,
     segment_on_floor,
 )
+from pipeline.surfaces import local_surfaces
 from tests.pipeline.calibration_data import box_prepared, box_problem, floor_only_problem
 
 
@@ -164,3 +168,42 @@ def test_a_floor_seen_only_as_a_far_strip_is_found_whatever_the_draws() -> None:
     iterations = SegmentationConfig().ransac_iterations
     for seed in range(10):
         _assert_the_rooms_floor(_floor_of(points, up, iterations=iterations, seed=seed), seed)
+
+
+def _noisy_wall(spacing_m: float, noise_m: float, seed: int = 0) -> NDArray[np.float64]:
+    """A 1.2 m square wall 2 m in front of the sensor (at the origin), sampled on a jittered
+    grid of `spacing_m`, each point moved along its beam by Gaussian range noise `noise_m`."""
+    rng = np.random.default_rng(seed)
+    side = np.arange(-0.6, 0.6, spacing_m)
+    y, z = (a.ravel() for a in np.meshgrid(side, side))
+    points = np.column_stack([np.full(len(y), 2.0), y, z])
+    points[:, 1:] += rng.uniform(-0.3, 0.3, (len(y), 2)) * spacing_m
+    beams = points / np.linalg.norm(points, axis=1, keepdims=True)
+    noisy: NDArray[np.float64] = points + beams * rng.normal(0.0, noise_m, len(points))[:, None]
+    return noisy
+
+
+@pytest.mark.parametrize(
+    ("spacing_m", "noise_m", "low", "high"),
+    [
+        (0.02, 0.02, 65, 95),  # the reference: about the fixed patch
+        # Twice the noise: more points, though not quite twice as many (a 3-D patch of a sheet
+        # 8 cm thick favours the point's own side, so the noise measures about 20 % low).
+        (0.02, 0.04, 105, 170),
+        (0.04, 0.02, 30, 50),  # half the density along each axis: half the points
+    ],
+)
+def test_a_noise_scaled_patch_grows_with_the_noise_and_shrinks_with_the_spacing(
+    spacing_m: float, noise_m: float, low: int, high: int
+) -> None:
+    config = SegmentationConfig(surface_patch="noise", surface_neighbours=80)
+    wall = _noisy_wall(spacing_m, noise_m)
+    assert low <= patch_neighbours(wall, local_surfaces(wall, 80), config) <= high
+
+
+def test_a_cloud_whose_noise_cannot_be_measured_keeps_the_fixed_patch() -> None:
+    config = SegmentationConfig(surface_patch="noise", surface_neighbours=80)
+    small = _noisy_wall(0.2, 0.02)  # 36 points: fewer than a patch
+    assert patch_neighbours(small, local_surfaces(small, 80), config) == 80
+    exact = _noisy_wall(0.02, 0.0)  # no noise to scale by
+    assert patch_neighbours(exact, local_surfaces(exact, 80), config) == 80
