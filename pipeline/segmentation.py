@@ -553,9 +553,7 @@ def patch_neighbours(objects: Points, surfaces: LocalSurfaces, config: Segmentat
     k = config.surface_neighbours
     if len(objects) <= k:
         return k
-    ranges = np.linalg.norm(surfaces.projected, axis=1, keepdims=True)
-    beams = surfaces.projected / np.maximum(ranges, 1e-12)
-    sigma = range_noise_from_smoothing(objects, surfaces.projected, surfaces.normals, beams)
+    sigma = range_noise_from_smoothing(objects, surfaces.projected, surfaces.normals)
     if sigma is None or sigma <= 0.0:
         return k
     distances, _ = KDTree(objects).query(objects, k=k)

@@ -32,13 +32,22 @@ MIN_NOISE_SAMPLES = 30
 offset is reported (zeros)."""
 
 
+def beams_to(points: Points) -> Points:
+    """(N, 3) unit directions from the sensor (at the origin) to `points`."""
+    ranges = np.linalg.norm(points, axis=1, keepdims=True)
+    unit: Points = points / np.maximum(ranges, 1e-12)
+    return unit
+
+
 def range_noise_from_smoothing(
-    raw: Points, smoothed: Points, normals: Points, beams: Points
+    raw: Points, smoothed: Points, normals: Points, beams: Points | None = None
 ) -> float | None:
     """The range noise (m, one sigma, robust) that the smoothing removed: each point's move along
     its normal divided by the cosine between normal and beam, over the points seen within 60 deg
     of their normal (a grazing beam turns a small move into a large range). None with fewer than
-    `MIN_NOISE_SAMPLES` such points."""
+    `MIN_NOISE_SAMPLES` such points. `beams`: default, the directions to `smoothed`."""
+    if beams is None:
+        beams = beams_to(smoothed)
     cos = np.abs(np.einsum("ni,ni->n", normals, beams))
     facing = cos >= 0.5
     if np.count_nonzero(facing) < MIN_NOISE_SAMPLES:
@@ -63,8 +72,7 @@ def smoothing_offsets(
     offsets = np.zeros(len(raw))
     if len(raw) <= patch:
         return offsets
-    ranges = np.linalg.norm(smoothed, axis=1, keepdims=True)
-    beams = smoothed / np.maximum(ranges, 1e-12)
+    beams = beams_to(smoothed)
     sigma = range_noise_from_smoothing(raw, smoothed, normals, beams)
     if sigma is None or sigma == 0.0:
         return offsets
