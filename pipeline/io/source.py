@@ -16,7 +16,7 @@ import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import apsw
 import yaml
@@ -112,7 +112,25 @@ class RosbagsReader:
         """`(connection, log time ns, raw bytes)` of those connections, in log-time order."""
         with library_call():
             messages = self._reader.messages(connections=connections)
-        return guarded(iter(messages))
+        return _well_formed(guarded(iter(messages)))
+
+
+def _well_formed(
+    messages: Iterator[tuple[Connection, Any, Any]],
+) -> Iterator[tuple[Connection, int, bytes]]:
+    """`messages` as rosbags yields them, each checked to have an integer log time and bytes:
+    a damaged sqlite3 bag can hold a row whose timestamp or data is NULL, which rosbags passes
+    on as None (a `LibraryError`, so the recording is reported damaged)."""
+    for connection, log_ns, raw in messages:
+        # (Damaged sqlite3 rows can also hold a REAL or TEXT where an integer or a BLOB was.)
+        if not isinstance(log_ns, int) or not isinstance(raw, bytes | memoryview):
+            raise LibraryError(
+                ValueError(
+                    f"a message on {connection.topic} has log time {log_ns!r} and "
+                    f"{type(raw).__name__} data"
+                )
+            )
+        yield connection, log_ns, cast(bytes, raw)
 
 
 class OpenRecording:

@@ -3,6 +3,9 @@ remedy, known from where they were caught; the same kinds of error from our code
 
 from __future__ import annotations
 
+import contextlib
+import shutil
+import sqlite3
 import struct
 from collections.abc import Iterator
 from pathlib import Path
@@ -94,3 +97,21 @@ def test_the_same_error_from_our_decoding_stays_a_bug(
     monkeypatch.setattr("pipeline.io.reader.field_names", field_names)
     with pytest.raises(KeyError, match="a bug of ours"):
         read_recording(recordings["bare-mcap"])
+
+
+@pytest.mark.parametrize("column", ["timestamp", "data"])
+def test_a_sqlite3_row_with_a_null_is_damage(
+    column: str, recordings: dict[str, Path], tmp_path: Path
+) -> None:
+    # A damaged page can leave a row's timestamp or data NULL; rosbags hands it on as None.
+    bag = Path(shutil.copy(recordings["bare-db3"], tmp_path / "damaged.db3"))
+    with contextlib.closing(sqlite3.connect(bag)) as db, db:
+        # The damage bypasses the schema's NOT NULL, which a plain UPDATE would enforce.
+        db.execute("PRAGMA writable_schema = ON")
+        db.execute(
+            "UPDATE sqlite_master SET sql = replace(sql, 'NOT NULL', '') WHERE name = 'messages'"
+        )
+    with contextlib.closing(sqlite3.connect(bag)) as db, db:
+        db.execute(f"UPDATE messages SET {column} = NULL WHERE id = 7")
+    with pytest.raises(CorruptRecordingError, match=r"a message on /\S+ has log time"):
+        read_recording(bag)
