@@ -34,7 +34,7 @@ def associate(objective: JointObjective, placed: PlacedClouds) -> Pairs:
         return Pairs(empty, empty, float("nan"))
     sources, targets = [], []
     cross_error = float("nan")
-    every_lidar = objective.config.cross_pairs == "every_lidar"
+    every_lidar = objective.config.pairs_every_lidar(objective.layout.n_lidars)
     for lidar in range(objective.layout.n_lidars):
         rows = np.flatnonzero(objective.reference.lidar == lidar)
         if len(rows) == 0:

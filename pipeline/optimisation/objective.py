@@ -105,7 +105,7 @@ class JointObjective:
         parts, part_normals = _with_normals(parts, kept, normals, config)
         # Targets: the reference LiDAR's map, and every LiDAR's own when it is kept consistent or
         # paired with the others'.
-        every_lidar = config.cross_pairs == "every_lidar"
+        every_lidar = config.pairs_every_lidar(len(objects))
         is_target = [p[0] == 0 or config.lidar_self_consistency or every_lidar for p in parts]
         reference, reference_normals = _stacked(parts, part_normals, is_target)
         used = [p[0] > 0 or config.reference_self_consistency or every_lidar for p in parts]

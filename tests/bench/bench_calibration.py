@@ -148,6 +148,7 @@ CONFIG_METHODS = (
     "beam_fit",
     "fine_cauchy",
     "every_lidar",
+    "reference_pairs",
     "floor_measured",
     "extrinsic_convergence",
     "global_alignment",
@@ -207,8 +208,8 @@ def method_config(method: str) -> PipelineConfig:
         data["observability"]["surface_sensitivity_model"] = None
     elif method == "fine_cauchy":
         data["optimisation"]["fine_robust_loss"] = "cauchy"
-    elif method == "every_lidar":
-        data["optimisation"]["cross_pairs"] = "every_lidar"
+    elif method in ("every_lidar", "reference_pairs"):
+        data["optimisation"]["cross_pairs"] = method.removesuffix("_pairs")
     elif method == "extrinsic_convergence":
         data["optimisation"].update(
             converge_on="extrinsics",

@@ -83,3 +83,20 @@ def test_eq_11_stays_the_reference_maps_alone_with_every_lidar() -> None:
         placed_error.append(pairs.cross_error)
     assert placed_error[1] == pytest.approx(placed_error[0])
     assert placed_error[0] == pytest.approx(0.3, abs=0.01)
+
+
+@pytest.mark.parametrize(("n_lidars", "every_lidar"), [(2, False), (3, True), (4, True)])
+def test_auto_pairs_with_every_lidars_map_from_three_lidars(
+    n_lidars: int, every_lidar: bool
+) -> None:
+    rng = np.random.default_rng(1)
+    objects = [[wall_seen_from(0.0, rng), wall_seen_from(0.0, rng)] for _ in range(n_lidars)]
+    normals = [[np.tile(WALL_NORMAL, (len(c), 1)) for c in row] for row in objects]
+    config = OptimisationConfig(max_points_per_cloud=None, cross_pairs="auto")
+    assert config.pairs_every_lidar(n_lidars) == every_lidar
+    built = JointObjective.build(objects, None, None, 2, config, normals)
+    pairs = associate(
+        built, built.place(np.stack([np.eye(4)] * 2), np.stack([np.eye(4)] * n_lidars))
+    )
+    targets = set(built.reference.lidar[pairs.target].tolist())
+    assert targets == (set(range(n_lidars)) if every_lidar else {0})
