@@ -240,10 +240,12 @@ def _floor_score(
     """(P,) each plane's points of (N, 3) `points` within `distance_m`, less those beyond it below
     the plane: a LiDAR cannot see below the floor, so every point there tells against a plane
     (a shelf top, or a plane through the walls, has the floor under it)."""
-    distances = points @ normals.T + offsets
-    score: NDArray[np.int64] = (np.abs(distances) < distance_m).sum(axis=0) - (
-        distances <= -distance_m
-    ).sum(axis=0)
+    distances = points @ normals.T
+    distances += offsets
+    # count_nonzero: a boolean sum along an axis casts every element first (a third slower).
+    score: NDArray[np.int64] = np.count_nonzero(
+        np.abs(distances) < distance_m, axis=0
+    ) - np.count_nonzero(distances <= -distance_m, axis=0)
     return score
 
 

@@ -169,13 +169,15 @@ def _project_rows(cloud: Points, rows: slice, idx: NDArray[np.integer], fit: _Fi
         else smallest_eigenvectors(covariance)
     )
     if quadric and k >= 10:
-        projected, fitted = _quadric_surfaces(cloud, points, idx, normals)
+        # The neighbours seen from the point, (N, k, 3): both fits below share them.
+        offsets = cloud[idx] - points[:, None, :]
+        projected, fitted = _quadric_surfaces(offsets, points, normals)
         kept = normals if normals_along_beams else fitted
         if along_beams:
             # Only where the point goes: the normal from a quadric fitted along a beam has six
             # coefficients to spend on a patch seen on one or two scan lines.
             along_normals = None if normals_along_beams else projected
-            projected, _ = _quadric_surfaces(cloud, points, idx, beams)
+            projected, _ = _quadric_surfaces(offsets, points, beams)
             return LocalSurfaces(projected, kept, along_normals)
         return LocalSurfaces(projected, kept)
     if centre_neighbours is not None and centre_neighbours < k:
@@ -198,18 +200,17 @@ def _normals_along_beams(covariance: NDArray[np.float64], beams: Points) -> Poin
 
 
 def _quadric_surfaces(
-    cloud: Points, points: Points, idx: NDArray[np.integer], normals: Points
+    offsets: NDArray[np.float64], points: Points, normals: Points
 ) -> tuple[Points, Points]:
     """Project each point (N, 3) onto `h = c0 + c1 a + c2 b + c3 a^2 + c4 ab + c5 b^2`, fitted by
-    least squares to its neighbours `cloud[idx]` (idx (N, k)) in the frame (h along the unit
-    `normals` (N, 3), a, b across them) centred at the point, along `normals`; return the
-    projections and the fitted surface's unit normals there."""
+    least squares to its k neighbours, `offsets` (N, k, 3) from the point, in the frame (h along
+    the unit `normals` (N, 3), a, b across them) centred at the point, along `normals`; return
+    the projections and the fitted surface's unit normals there."""
     # Any orthonormal tangent pair will do: the full quadratic does not depend on its rotation.
     helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     u = np.cross(normals, helper)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     v = np.cross(normals, u)
-    offsets = cloud[idx] - points[:, None, :]  # (N, k, 3)
     frame = np.stack([u, v, normals], axis=2)  # (N, 3, 3): columns a, b, h
     local = np.matmul(offsets, frame)  # (N, k, 3)
     a, b, h = local[:, :, 0], local[:, :, 1], local[:, :, 2]

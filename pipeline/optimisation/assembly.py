@@ -54,11 +54,8 @@ def normal_equations(
     count = residual.size
     if objective.floor and with_floor:
         floor_residual, floor_jac = floor_terms(
-            objective, T_G_ref, T_ref_lidar, jacobians=True, ideal=ideal_floor
+            objective, T_G_ref, T_ref_lidar, jacobians=True, ideal=ideal_floor, stop=floor_stop
         )
-        if floor_stop is not None:
-            rows = np.array([stop == floor_stop for _, stop, _ in objective.floor])
-            floor_residual, floor_jac = floor_residual[rows], floor_jac[rows]
         H += np.einsum("kri,krj->ij", floor_jac, floor_jac)
         b += np.einsum("kri,kr->i", floor_jac, floor_residual)
         chi2 += float(np.sum(floor_residual**2))
@@ -116,19 +113,25 @@ def _add_point_groups(
                 slots.setdefault(column, []).append(slot)
         if not slots:
             continue
-        block = np.concatenate(
-            [
-                sum(jac[a:b_end, :, 6 * x : 6 * x + 6] for x in group_slots)
-                for group_slots in slots.values()
-            ],
-            axis=2,
-        )
+        block = np.concatenate([_slot_sum(jac[a:b_end], x) for x in slots.values()], axis=2)
         wblock = block * weight[a:b_end, None, None]
         cols = np.concatenate([np.arange(c, c + 6) for c in slots])
         flat = block.reshape(-1, block.shape[2])
         wflat = wblock.reshape(-1, block.shape[2])
         H[np.ix_(cols, cols)] += wflat.T @ flat
         b[cols] += wflat.T @ residual[a:b_end].reshape(-1)
+
+
+def _slot_sum(jac: NDArray[np.float64], slots: list[int]) -> NDArray[np.float64]:
+    """The sum of the 6-column blocks `slots` of the rows `jac` (n, r, 24): one pose's columns
+    where it fills several slots of a pair; a view where it fills one."""
+    first = jac[:, :, 6 * slots[0] : 6 * slots[0] + 6]
+    if len(slots) == 1:
+        return first
+    total = first.copy()
+    for slot in slots[1:]:
+        total += jac[:, :, 6 * slot : 6 * slot + 6]
+    return total
 
 
 def stop_contributions(

@@ -125,8 +125,10 @@ def floor_terms(
     *,
     jacobians: bool,
     ideal: bool = False,
+    stop: int | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Whitened floor residuals (K, 3) and, if asked, their Jacobians (K, 3, P).
+    """Whitened floor residuals (K, 3) and, if asked, their Jacobians (K, 3, P), of every
+    floor observation (in `objective.floor`'s order) or of one `stop`'s alone.
 
     `ideal`: linearise at the common floor instead of at each observed plane. The exact
     Jacobian gives a turn about the floor normal a little leverage through each plane's
@@ -135,15 +137,21 @@ def floor_terms(
     assert objective.floor_G is not None
     normal_G, offset_G = objective.floor_G.normal, objective.floor_G.offset
     tangent = tangent_basis(normal_G)
-    residual = np.empty((len(objective.floor), 3))
-    jac = np.zeros((len(objective.floor), 3, objective.layout.size if jacobians else 0))
-    for row, (lidar, stop, plane) in enumerate(objective.floor):
-        normal, offset = plane_in_parent(plane, T_G_ref[stop] @ T_ref_lidar[lidar])
+    observed = [term for term in objective.floor if stop is None or term[1] == stop]
+    residual = np.empty((len(observed), 3))
+    jac = np.zeros((len(observed), 3, objective.layout.size if jacobians else 0))
+    for row, (lidar, seen_at, plane) in enumerate(observed):
+        normal, offset = plane_in_parent(plane, T_G_ref[seen_at] @ T_ref_lidar[lidar])
         residual[row, :2] = tangent.T @ (normal - normal_G)
         residual[row, 2] = offset - offset_G
         if jacobians:
             _fill_floor_jacobian(
-                jac[row], objective, lidar, stop, normal_G if ideal else normal, T_G_ref, ideal
+                jac[row],
+                objective,
+                (lidar, seen_at),
+                (tangent, normal_G if ideal else normal),
+                T_G_ref,
+                ideal,
             )
     sigma = objective.floor_sigma
     return residual / sigma, jac / sigma[None, :, None]
@@ -152,17 +160,19 @@ def floor_terms(
 def _fill_floor_jacobian(
     jac: NDArray[np.float64],
     objective: JointObjective,
-    lidar: int,
-    stop: int,
-    at: NDArray[np.float64],
+    observation: tuple[int, int],
+    linearised: tuple[NDArray[np.float64], NDArray[np.float64]],
     T_G_ref: NDArray[np.float64],
     ideal: bool,
 ) -> None:
-    """Write into `jac` (3, P) one floor observation's derivatives, linearised at the normal
-    `at` in G (the observed plane's, or under `ideal` the common floor's)."""
+    """Write into `jac` (3, P) one floor observation's derivatives (`observation`: its LiDAR
+    and stop), linearised at the normal `at` in G (the observed plane's, or under `ideal` the
+    common floor's; `linearised` is `(tangent, at)`, `tangent` (3, 2) the common floor's
+    `tangent_basis`, computed once for every observation)."""
     assert objective.floor_G is not None
+    lidar, stop = observation
+    tangent, at = linearised
     normal_G = objective.floor_G.normal
-    tangent = tangent_basis(normal_G)
     d_twist = np.zeros((3, 6))
     d_twist[:2, 3:] = -tangent.T @ hat(at)
     d_twist[2, :3] = -at
