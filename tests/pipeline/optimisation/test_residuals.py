@@ -1,8 +1,10 @@
 import numpy as np
 import pytest
 
-from pipeline.optimisation import RobustLoss
-from pipeline.optimisation.residuals import robust_sigma, robust_weight_and_cost
+from pipeline.optimisation import OptimisationConfig, RobustLoss
+from pipeline.optimisation.objective import JointObjective
+from pipeline.optimisation.residuals import floor_terms, robust_sigma, robust_weight_and_cost
+from tests.pipeline.optimisation.inputs import stage_inputs
 
 
 @pytest.mark.parametrize("loss", ["cauchy", "geman_mcclure", "huber", "none"])
@@ -40,3 +42,27 @@ def test_the_robust_sigma_of_residuals_ignores_a_third_of_outliers(dimensions: i
     assert 0.008 < sigma < 0.008 * 2
     assert robust_sigma(inliers) == pytest.approx(0.008, rel=0.05)
     assert np.isnan(robust_sigma(np.zeros((0, dimensions))))
+
+
+@pytest.mark.parametrize("ideal", [False, True])
+def test_one_stops_floor_terms_are_its_rows_of_every_stops(ideal: bool) -> None:
+    # The per-stop jackknife asks for one stop's floor terms alone: the same rows, to the bit,
+    # as every stop's terms would give, in the objective's order.
+    inputs = stage_inputs()
+    rough = inputs.rough
+    objective = JointObjective.build(
+        inputs.objects,
+        inputs.planes,
+        rough.floor_G,
+        len(rough.T_G_ref),
+        OptimisationConfig(max_points_per_cloud=60),
+        inputs.normals,
+    )
+    stops, lidars = rough.T_G_ref, rough.T_ref_lidar
+    every, every_jac = floor_terms(objective, stops, lidars, jacobians=True, ideal=ideal)
+    for stop in range(len(stops)):
+        rows = [seen_at == stop for _, seen_at, _ in objective.floor]
+        assert any(rows)
+        one, one_jac = floor_terms(objective, stops, lidars, jacobians=True, ideal=ideal, stop=stop)
+        np.testing.assert_array_equal(one, every[rows])
+        np.testing.assert_array_equal(one_jac, every_jac[rows])
