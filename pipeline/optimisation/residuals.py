@@ -145,14 +145,8 @@ def floor_terms(
         residual[row, :2] = tangent.T @ (normal - normal_G)
         residual[row, 2] = offset - offset_G
         if jacobians:
-            _fill_floor_jacobian(
-                jac[row],
-                objective,
-                (lidar, seen_at),
-                (tangent, normal_G if ideal else normal),
-                T_G_ref,
-                ideal,
-            )
+            at = normal_G if ideal else normal
+            _fill_floor_jacobian(jac[row], objective, lidar, seen_at, at, T_G_ref, ideal, tangent)
     sigma = objective.floor_sigma
     return residual / sigma, jac / sigma[None, :, None]
 
@@ -160,18 +154,17 @@ def floor_terms(
 def _fill_floor_jacobian(
     jac: NDArray[np.float64],
     objective: JointObjective,
-    observation: tuple[int, int],
-    linearised: tuple[NDArray[np.float64], NDArray[np.float64]],
+    lidar: int,
+    stop: int,
+    at: NDArray[np.float64],
     T_G_ref: NDArray[np.float64],
     ideal: bool,
+    tangent: NDArray[np.float64],
 ) -> None:
-    """Write into `jac` (3, P) one floor observation's derivatives (`observation`: its LiDAR
-    and stop), linearised at the normal `at` in G (the observed plane's, or under `ideal` the
-    common floor's; `linearised` is `(tangent, at)`, `tangent` (3, 2) the common floor's
-    `tangent_basis`, computed once for every observation)."""
+    """Write into `jac` (3, P) one floor observation's derivatives, linearised at the normal
+    `at` in G (the observed plane's, or under `ideal` the common floor's); `tangent` (3, 2) is
+    the common floor's `tangent_basis`, which the caller computes once for every observation."""
     assert objective.floor_G is not None
-    lidar, stop = observation
-    tangent, at = linearised
     normal_G = objective.floor_G.normal
     d_twist = np.zeros((3, 6))
     d_twist[:2, 3:] = -tangent.T @ hat(at)
