@@ -28,6 +28,7 @@ from pipeline.optimisation import OptimisationConfig
 from pipeline.rough_refinement import RoughRefinementConfig
 from pipeline.segmentation import SegmentationConfig
 from pipeline.verdict import VerdictConfig
+from pipeline.visibility import VisibilityConfig
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid")
 
@@ -70,6 +71,7 @@ class PipelineConfig(BaseModel):
     passes; see docs/method.md."""
     optimisation: OptimisationConfig = OptimisationConfig()
     metric: MetricConfig = MetricConfig()
+    visibility: VisibilityConfig = VisibilityConfig()
     observability: ObservabilityConfig = ObservabilityConfig()
     verdict: VerdictConfig = VerdictConfig()
 

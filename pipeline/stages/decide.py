@@ -16,6 +16,7 @@ def lidar_calibrations(state: CalibrationState) -> tuple[LidarCalibration, ...]:
     uncertainties = required(state.uncertainties, "observability")
     initial = required(state.metric_initial, "metric")
     final = required(state.metric_final, "metric")
+    seen = required(state.metric_seen, "metric")
     objects = state.objects_in_lidar()
     return tuple(
         LidarCalibration(
@@ -28,6 +29,8 @@ def lidar_calibrations(state: CalibrationState) -> tuple[LidarCalibration, ...]:
             object_points=sum(len(points) for points in objects[index]),
             metric_initial=initial.per_lidar[index],
             metric_final=final.per_lidar[index],
+            seen_metric_final=seen.per_lidar[index],
+            seen_points=seen.seen[index],
         )
         for index, info in enumerate(state.lidars)
     )
@@ -47,6 +50,8 @@ def evidence(lidar: LidarCalibration) -> LidarEvidence:
         undetermined=lidar.uncertainty.undetermined,
         deviation_translation_m=translation,
         deviation_rotation_deg=rotation,
+        seen_metric_error_m=lidar.seen_metric_final,
+        seen_points=lidar.seen_points,
     )
 
 

@@ -25,6 +25,7 @@ from pipeline.rough_refinement import RoughRefinementResult
 from pipeline.segmentation import FloorFit, Segmentation
 from pipeline.transforms import Matrix4, Points, pose_difference
 from pipeline.verdict import StartsEvidence, Verdict
+from pipeline.visibility import SeenMetric
 
 _Value = TypeVar("_Value")
 
@@ -58,7 +59,8 @@ class StageReport:
 @dataclass(frozen=True)
 class LidarCalibration:
     """One LiDAR's outcome. Transforms (4, 4) `T_base_lidar`; `metric_*` is eq. 12 over this
-    LiDAR's points alone (NaN for the reference)."""
+    LiDAR's points alone (NaN for the reference), `seen_metric_final` the same over its points
+    the reference saw (`pipeline.visibility`), `seen_points` of them."""
 
     frame: str
     topic: str
@@ -69,6 +71,8 @@ class LidarCalibration:
     object_points: int
     metric_initial: float
     metric_final: float
+    seen_metric_final: float
+    seen_points: int
 
     @property
     def change(self) -> tuple[float, float]:
@@ -111,7 +115,8 @@ class CalibrationState:
     `T_ref_lidar`): another start for stage 4 (global alignment's candidate when it is to be
     judged after refinement), None when there is none. `metric_final` is the metric of the
     current poses: stage 4 leaves it where it chose between two starts by it (no stage after
-    stage 4 moves the poses), the metric stage otherwise. `start_comparison`: stage 4's two
+    stage 4 moves the poses), the metric stage otherwise; `metric_seen` the metric stage's
+    eq. 12 over what the reference saw. `start_comparison`: stage 4's two
     solutions side by side, None when it had one start. `surface_shift`: how far stage 4's
     solution moves on surfaces smoothed further, and what chance alone would move it (None: not
     measured, `pipeline.stages.sensitivity`)."""
@@ -134,6 +139,7 @@ class CalibrationState:
     optimised: OptimisationResult | None = None
     metric_initial: MetricError | None = None
     metric_final: MetricError | None = None
+    metric_seen: SeenMetric | None = None
     start_comparison: SolutionComparison | None = None
     surface_shift: SurfaceShift | None = None
     T_base_ref_calibrated: Matrix4 | None = None

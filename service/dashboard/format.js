@@ -37,6 +37,7 @@
   // whether the limit is a most or a least.
   const CHECK_KINDS = {
     metric_error: { value: mm, bound: "≤" },
+    seen_metric_error: { value: mm, bound: "≤" },
     convergence: { value: (v) => count(v, "iterations"), bound: "≤" },
     object_points: { value: (v) => count(v, "points"), bound: "≥" },
   };

@@ -3,7 +3,7 @@
     .venv/bin/python -m tests.bench.bench_random [--seeds 1000-1099] [--jobs 2]
         [--rate-scale 1.0] [--cache /tmp/fleetcal-bench-random] [--methods proposed ...]
         [--worlds open,room,people,uneven-floor,dust,factory,random]
-        [--without-checks metric_error,...]
+        [--without-checks metric_error,...] [--limits seen_metric_error=0.015,...]
 
 For each seed the recording is synthesised once into `CACHE/recordings/rate-F/seed-N` (a
 recording left half-written is written again), then read from disk with `pipeline.io` and
@@ -24,7 +24,8 @@ recordings' errors (world - open), and how many recordings each came out better 
 Each result keeps every check of its verdict (name, value, limit, outcome) and, per
 non-reference LiDAR, its object points' distances to the reference's map as a 1 mm histogram
 (`distance_histogram`). `--without-checks KINDS` judges the cached verdicts again without those
-kinds of check (`without_checks`): what a verdict without them would have said, in seconds.
+kinds of check (`without_checks`): what a verdict without them would have said, in seconds;
+`--limits KIND=LIMIT,...` judges them again with other limits (`with_limits`).
 
 The error of a recording is, over its non-reference LiDARs, the largest error of the calibrated
 `T_ref_lidar` against the truth (as `bench_calibration` measures it). Success: within 5 mm and
@@ -44,11 +45,12 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import math  # noqa: E402
 import shutil  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
-from collections.abc import Callable, Collection, Iterable, Sequence  # noqa: E402
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from dataclasses import asdict, dataclass, field, replace  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -261,6 +263,14 @@ def distance_histogram(capped: NDArray[np.float64], cap_m: float) -> list[int]:
     return [int(c) for c in np.bincount(index, minlength=bins + 1)]
 
 
+def _require_checks(record: SeedResult) -> None:
+    if not record.checks:
+        raise SystemExit(
+            f"seed {record.seed} ({record.method}): its cached result keeps no checks; delete "
+            "it (or use a new --cache) to calibrate it again before judging it again"
+        )
+
+
 def without_checks(record: SeedResult, kinds: Collection[str]) -> SeedResult:
     """`record` judged again as if the verdict had no checks of these kinds (a check's kind is
     its name before `:`, e.g. `metric_error`, `convergence`): passed when every other check
@@ -268,17 +278,50 @@ def without_checks(record: SeedResult, kinds: Collection[str]) -> SeedResult:
     again."""
     if record.refused is not None or not kinds:
         return record
-    if not record.checks:
-        raise SystemExit(
-            f"seed {record.seed} ({record.method}): its cached result keeps no checks; delete "
-            "it (or use a new --cache) to calibrate it again before judging without checks"
-        )
+    _require_checks(record)
     kept = [c for c in record.checks if str(c["name"]).split(":")[0] not in kinds]
     return replace(
         record,
         passed=all(bool(c["passed"]) for c in kept),
         failed_checks=[str(c["name"]) for c in kept if not c["passed"]],
     )
+
+
+def with_limits(record: SeedResult, limits: Mapping[str, float]) -> SeedResult:
+    """`record` judged again with these limits for the checks of these kinds (at-most checks:
+    a check passes when its value is finite and at most its limit). `metric_error` (eq. 12, not
+    checked by default) is judged from the recording's eq. 12 where its verdict had no such check.
+    A refusal stays one."""
+    if record.refused is not None or not limits:
+        return record
+    _require_checks(record)
+    checks = [dict(c) for c in record.checks]
+    if "metric_error" in limits and not any(c["name"] == "metric_error" for c in checks):
+        checks.insert(0, {"name": "metric_error", "value": record.metric_error_m})
+    for check in checks:
+        limit = limits.get(str(check["name"]).split(":")[0])
+        if limit is not None:
+            value = check["value"]
+            passed = isinstance(value, int | float) and math.isfinite(value) and value <= limit
+            check.update(limit=limit, passed=passed)
+    return replace(
+        record,
+        checks=checks,
+        passed=all(bool(c["passed"]) for c in checks),
+        failed_checks=[str(c["name"]) for c in checks if not c["passed"]],
+    )
+
+
+def parse_limits(text: str) -> dict[str, float]:
+    """`kind=limit,...` (e.g. `seen_metric_error=0.015,metric_error=0.04`) as a mapping."""
+    limits = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        kind, _, value = item.partition("=")
+        try:
+            limits[kind.strip()] = float(value)
+        except ValueError:
+            raise SystemExit(f"--limits: {item!r} is not kind=number") from None
+    return limits
 
 
 def describe(record: SeedResult) -> str:
@@ -547,8 +590,15 @@ def main(argv: Sequence[str] | None = None) -> None:
         "separated; from the cached checks, nothing is calibrated again): what a verdict "
         "without them would have said",
     )
+    parser.add_argument(
+        "--limits",
+        default="",
+        help="judge the verdicts again with these limits, e.g. seen_metric_error=0.015 or "
+        "metric_error=0.04 (comma separated kind=limit; from the cached checks)",
+    )
     args = parser.parse_args(argv)
     seeds = parse_seeds(args.seeds)
+    limits = parse_limits(args.limits)
     dropped = {kind.strip() for kind in args.without_checks.split(",") if kind.strip()}
     worlds = parse_worlds(args.worlds)
     if args.jobs < 1 or not args.rate_scale > 0:
@@ -588,12 +638,14 @@ def main(argv: Sequence[str] | None = None) -> None:
                 flush=True,
             )
     records = sorted(
-        (without_checks(r, dropped) for r in records), key=lambda r: (r.method, r.world, r.seed)
+        (without_checks(with_limits(r, limits), dropped) for r in records),
+        key=lambda r: (r.method, r.world, r.seed),
     )
     print(
         f"# bench_random: seeds {args.seeds}, rate scale {args.rate_scale:g}"
         + (f", worlds {args.worlds}" if args.worlds else "")
         + (f", verdicts judged without {', '.join(sorted(dropped))}" if dropped else "")
+        + (f", verdicts judged with limits {args.limits}" if limits else "")
         + "\n"
     )
     print(report(records, args.methods))

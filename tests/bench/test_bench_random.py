@@ -10,6 +10,7 @@ from tests.bench.bench_random import (
     SeedResult,
     comparisons,
     grouped_table,
+    parse_limits,
     parse_seeds,
     parse_worlds,
     recording_dir,
@@ -17,6 +18,7 @@ from tests.bench.bench_random import (
     result_path,
     run_seed,
     summary_row,
+    with_limits,
     without_checks,
     world_pairs,
     world_pairs_table,
@@ -97,6 +99,29 @@ def test_verdicts_are_judged_again_without_the_named_kinds_of_check() -> None:
     assert without_checks(refused, {"metric_error"}) is refused
     with pytest.raises(SystemExit, match="keeps no checks"):
         without_checks(_record(4, 3.0, 0.05, True), {"metric_error"})
+
+
+def test_verdicts_are_judged_again_with_other_limits() -> None:
+    record = _record(1, 3.0, 0.05, False)
+    record.metric_error_m = 0.05
+    record.checks = [
+        {"name": "seen_metric_error:lidar_1", "value": 0.012, "limit": 0.01, "passed": False},
+        {"name": "seen_metric_error:lidar_2", "value": None, "limit": 0.01, "passed": False},
+        _check("convergence", True),
+    ]
+    looser = with_limits(record, {"seen_metric_error": 0.015})
+    assert looser.failed_checks == ["seen_metric_error:lidar_2"]  # no value never passes
+    assert looser.checks[0]["limit"] == 0.015 and record.checks[0]["limit"] == 0.01
+    with_eq12 = without_checks(with_limits(record, {"metric_error": 0.04}), {"seen_metric_error"})
+    assert with_eq12.failed_checks == ["metric_error"]  # added from the recording's eq. 12
+    assert without_checks(with_limits(record, {"metric_error": 0.06}), {"seen_metric_error"}).passed
+    assert with_limits(record, {}) is record
+    assert parse_limits("seen_metric_error=0.015, metric_error=0.04") == {
+        "seen_metric_error": 0.015,
+        "metric_error": 0.04,
+    }
+    with pytest.raises(SystemExit, match="kind=number"):
+        parse_limits("seen_metric_error")
 
 
 def test_grouped_tables_have_a_row_per_group_and_one_over_all() -> None:

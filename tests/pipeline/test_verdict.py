@@ -23,6 +23,8 @@ def _lidar(frame: str, **changes: object) -> LidarEvidence:
         "undetermined": (),
         "deviation_translation_m": 0.05,
         "deviation_rotation_deg": 1.0,
+        "seen_metric_error_m": 0.003,
+        "seen_points": 4000,
     }
     values.update(changes)
     return LidarEvidence(**values)  # type: ignore[arg-type]
@@ -34,16 +36,18 @@ def test_a_good_calibration_passes_every_check() -> None:
     )
     assert verdict.passed
     names = [check.name for check in verdict.checks]
-    assert names[:2] == ["metric_error", "convergence"]
+    assert names[0] == "convergence"
+    assert "metric_error" not in names  # eq. 12 itself is checked only where a limit is set
     assert "determined:b" in names and "determined:a" not in names
+    assert "seen_metric_error:b" in names and "seen_metric_error:a" not in names
     assert not any(name.startswith("deviation") for name in names)
 
 
 def test_each_failure_is_a_named_check_with_value_and_limit() -> None:
-    config = VerdictConfig(max_deviation_translation_m=0.02)
+    config = VerdictConfig(max_deviation_translation_m=0.02, max_metric_error_m=0.04)
     lidars = [
         _lidar("a", is_reference=True),
-        _lidar("b", undetermined=("x", "y", "yaw"), object_points=0),
+        _lidar("b", undetermined=("x", "y", "yaw"), object_points=0, seen_metric_error_m=0.03),
     ]
     verdict = judge(0.05, False, 200, 200, lidars, config)
     failed = {check.name: check for check in verdict.failed}
@@ -54,7 +58,9 @@ def test_each_failure_is_a_named_check_with_value_and_limit() -> None:
         "object_points:b",
         "determined:b",
         "deviation_translation:b",
+        "seen_metric_error:b",
     }
+    assert "0.0300 m" in failed["seen_metric_error:b"].detail
     assert failed["determined:b"].dofs == ("x", "y", "yaw")
     assert "x, y, yaw" in failed["determined:b"].detail
     assert failed["metric_error"].value == 0.05
@@ -62,8 +68,28 @@ def test_each_failure_is_a_named_check_with_value_and_limit() -> None:
 
 
 def test_a_nan_value_never_passes() -> None:
-    verdict = judge(float("nan"), True, 3, 200, [_lidar("a", is_reference=True)], VerdictConfig())
-    assert [c.name for c in verdict.failed] == ["metric_error"]
+    config = VerdictConfig(max_metric_error_m=0.04)
+    lidars = [_lidar("a", is_reference=True), _lidar("b", seen_metric_error_m=math.nan)]
+    verdict = judge(math.nan, True, 3, 200, lidars, config)
+    assert [c.name for c in verdict.failed] == ["metric_error", "seen_metric_error:b"]
+
+
+def test_a_lidar_the_reference_saw_too_little_of_fails_the_seen_metric_saying_why() -> None:
+    lidars = [
+        _lidar("a", is_reference=True),
+        _lidar("b", seen_metric_error_m=0.001, seen_points=40),
+    ]
+    verdict = judge(0.05, True, 3, 200, lidars, VerdictConfig(min_seen_points=100))
+    (check,) = verdict.failed
+    assert check.name == "seen_metric_error:b" and math.isnan(check.value)
+    assert "40 of b's object points" in check.detail and "100 needed" in check.detail
+
+
+def test_a_seen_metric_limit_of_none_skips_its_check() -> None:
+    lidars = [_lidar("a", is_reference=True), _lidar("b", seen_metric_error_m=0.09)]
+    verdict = judge(0.05, True, 3, 200, lidars, VerdictConfig(max_seen_metric_error_m=None))
+    assert verdict.passed
+    assert not any(c.name.startswith("seen_metric_error") for c in verdict.checks)
 
 
 def _good() -> Verdict:
