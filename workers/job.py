@@ -97,7 +97,12 @@ def optimisation_progress(iteration: int, max_iterations: int) -> float:
 
 # The tolerance profile's limits that are the pipeline verdict's own (`VerdictConfig`); the drift
 # and design limits come with the reference poses (`workers.drift`), judged by the same verdict.
-_VERDICT_LIMITS = ("max_metric_error_m", "max_translation_stddev_m", "max_rotation_stddev_deg")
+_VERDICT_LIMITS = (
+    "max_metric_error_m",
+    "max_seen_metric_error_m",
+    "max_translation_stddev_m",
+    "max_rotation_stddev_deg",
+)
 
 
 def pipeline_config_for(

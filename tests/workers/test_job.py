@@ -22,15 +22,20 @@ from workers.job import calibrate_run, pipeline_config_for, without_scratch_path
 def test_the_profile_sets_the_verdict_and_the_upload_the_rest() -> None:
     limits = {
         "max_metric_error_m": 0.02,
+        "max_seen_metric_error_m": 0.01,
         "max_rotation_stddev_deg": 0.3,
         "max_translation_drift_m": 0.01,
     }
     config = pipeline_config_for({"frames": {"reference_frame": "lidar_rear"}}, limits)
     assert config.frames.reference_frame == "lidar_rear"
     assert config.verdict.max_metric_error_m == 0.02
+    assert config.verdict.max_seen_metric_error_m == 0.01
     assert config.verdict.max_rotation_stddev_deg == 0.3
     default = PipelineConfig().verdict
     assert config.verdict.max_translation_stddev_m == default.max_translation_stddev_m
+    unset = pipeline_config_for(None, {}).verdict
+    assert unset.max_metric_error_m is None  # eq. 12 is checked only where a profile sets it
+    assert unset.max_seen_metric_error_m == default.max_seen_metric_error_m
 
 
 def test_an_upload_cannot_set_its_verdict() -> None:
