@@ -518,7 +518,7 @@ def _side_view(data: ReportInput, maps: _Maps) -> Drawing:
 def convergence_note(data: ReportInput) -> str | None:
     """Why the error curve's last value is not the reported metric error (None when both read
     the same). They measure different things: the curve is stage 4's own error (eq. 11), the
-    metric the verdict judges is eq. 12 (`pipeline.metric`)."""
+    reported metric error eq. 12 (`pipeline.metric`)."""
     if not data.error_per_iteration:
         return None
     last, final = _mm(data.error_per_iteration[-1]), _mm(data.metric_error_final)

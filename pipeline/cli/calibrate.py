@@ -127,6 +127,11 @@ def summary(result: CalibrationResult) -> str:
         f"metric error (eq. 12): {_metres(result.metric_error_initial)} -> "
         f"{_metres(result.metric_error_final)}"
     )
+    seen = [lidar for lidar in result.lidars if not lidar.is_reference]
+    lines.append(
+        "off the surfaces the reference saw (seen metric): "
+        + ", ".join(f"{lidar.frame} {_metres(lidar.seen_metric_final)}" for lidar in seen)
+    )
     if result.verdict.passed:
         lines.append(f"verdict: PASSED ({len(result.verdict.checks)} checks)")
     else:

@@ -43,6 +43,7 @@ def test_a_good_recording_passes_with_exit_0(box_recording: Path, tmp_path: Path
     assert "read" in document["stages"]
     assert "verdict: PASSED" in result.stdout
     assert "lidar_rear" in result.stdout and "metric error (eq. 12)" in result.stdout
+    assert "off the surfaces the reference saw (seen metric): lidar_rear " in result.stdout
     for stage in ("read:", "segmentation:", "optimisation:", "verdict:"):
         assert stage in result.stderr
 
