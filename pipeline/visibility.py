@@ -108,7 +108,8 @@ def seen_metric(
             _, nearest = tree.query(placed[mask], k=1)
             offset = placed[mask] - reference[nearest]
             along_normal = np.abs(np.einsum("ij,ij->i", offset, reference_normals[nearest]))
-            mean = float(np.mean(np.minimum(along_normal, cap_m)))
+            # fmin: a point whose reference normal is undefined (NaN) counts as far, at the cap
+            mean = float(np.mean(np.fmin(along_normal, cap_m)))
         per_lidar.append(mean)
         seen.append(count)
         points.append(len(placed))

@@ -86,3 +86,13 @@ def test_a_stop_without_returns_sees_nothing() -> None:
     rays = [ReferenceRays.of(np.zeros((0, 3)), config)]
     seen = seen_by_reference(np.array([[1.0, 0.0, 0.0]]), rays, np.eye(4)[None], config)
     assert seen.tolist() == [False]
+
+
+def test_a_point_whose_reference_normal_is_undefined_counts_at_the_cap() -> None:
+    wall = _wall_cloud()
+    normals = np.full((len(wall), 3), np.nan)
+    T_ref_lidar = np.stack([np.eye(4)] * 2)
+    metric = seen_metric(
+        [[wall], [wall[::50]]], [normals], np.eye(4)[None], T_ref_lidar, VisibilityConfig(), 0.1
+    )
+    assert metric.per_lidar[1] == 0.1
