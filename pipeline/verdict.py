@@ -32,9 +32,9 @@ class VerdictConfig(BaseModel):
     max_seen_metric_error_m: float | None = Field(
         default=0.02,
         gt=0,
-        description="per LiDAR, eq. 12 over its object points the reference's rays reached "
-        "(pipeline.visibility): a misplaced LiDAR's points lie off the reference's surfaces or "
-        "in the free space it saw through. None: not checked",
+        description="per LiDAR, the mean distance of its object points the reference's rays "
+        "reached from the reference's surfaces there, along their normals (pipeline.visibility): "
+        "a misplaced LiDAR's points lie off those surfaces or in front of them. None: not checked",
     )
     min_seen_points: int = Field(
         default=100,
@@ -83,8 +83,9 @@ class Check:
 
 @dataclass(frozen=True)
 class LidarEvidence:
-    """What the verdict needs to know of one LiDAR. `seen_metric_error_m`: eq. 12 over its
-    object points the reference saw, `seen_points` of them (`pipeline.visibility`)."""
+    """What the verdict needs to know of one LiDAR. `seen_metric_error_m`: the mean distance of
+    its object points the reference saw from the reference's surfaces there, `seen_points` how
+    many those were (`pipeline.visibility`)."""
 
     frame: str
     is_reference: bool
@@ -295,8 +296,8 @@ def _lidar_checks(lidar: LidarEvidence, config: VerdictConfig) -> list[Check]:
 
 
 def _seen_metric_checks(lidar: LidarEvidence, config: VerdictConfig) -> list[Check]:
-    """Eq. 12 over the LiDAR's points the reference saw, where the config limits it; failed,
-    saying so, where the reference saw too few of them to tell."""
+    """The LiDAR's seen metric (its points the reference saw, against the reference's surfaces)
+    where the config limits it; failed, saying so, where the reference saw too few to tell."""
     limit = config.max_seen_metric_error_m
     if limit is None:
         return []

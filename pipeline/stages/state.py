@@ -59,8 +59,9 @@ class StageReport:
 @dataclass(frozen=True)
 class LidarCalibration:
     """One LiDAR's outcome. Transforms (4, 4) `T_base_lidar`; `metric_*` is eq. 12 over this
-    LiDAR's points alone (NaN for the reference), `seen_metric_final` the same over its points
-    the reference saw (`pipeline.visibility`), `seen_points` of them."""
+    LiDAR's points alone (NaN for the reference), `seen_metric_final` the mean distance of its
+    points the reference saw from the reference's surfaces (`pipeline.visibility`), `seen_points`
+    how many those were."""
 
     frame: str
     topic: str
@@ -115,8 +116,8 @@ class CalibrationState:
     `T_ref_lidar`): another start for stage 4 (global alignment's candidate when it is to be
     judged after refinement), None when there is none. `metric_final` is the metric of the
     current poses: stage 4 leaves it where it chose between two starts by it (no stage after
-    stage 4 moves the poses), the metric stage otherwise; `metric_seen` the metric stage's
-    eq. 12 over what the reference saw. `start_comparison`: stage 4's two
+    stage 4 moves the poses), the metric stage otherwise; `metric_seen` the seen metric of the
+    current poses (`pipeline.visibility`). `start_comparison`: stage 4's two
     solutions side by side, None when it had one start. `surface_shift`: how far stage 4's
     solution moves on surfaces smoothed further, and what chance alone would move it (None: not
     measured, `pipeline.stages.sensitivity`)."""
