@@ -40,7 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from pykdtree.kdtree import KDTree
 
 from pipeline.metric import place
-from pipeline.transforms import Points
+from pipeline.transforms import Points, apply, invert
 
 
 class VisibilityConfig(BaseModel):
@@ -149,8 +149,7 @@ def seen_by_reference(
         todo = np.flatnonzero(~seen)
         if stop.tree is None or len(todo) == 0:
             continue
-        # x_lidar = R^T (x_G - t): row vectors, so (x_G - t) @ R
-        local = (points_G[todo] - T_G_lidar[:3, 3]) @ T_G_lidar[:3, :3]
+        local = apply(invert(T_G_lidar), points_G[todo])
         ranges = np.linalg.norm(local, axis=1)
         ahead = ranges > 0
         todo, local, ranges = todo[ahead], local[ahead], ranges[ahead]
