@@ -50,6 +50,13 @@ class SegmentationConfig(BaseModel):
     floor_fit_points: int | None = Field(
         default=20_000, ge=3, description="the floor's least-squares refit uses this many inliers"
     )
+    floor_fit: Literal["along_beams", "points"] = Field(
+        default="along_beams",
+        description="how the floor's final refit weighs each inlier: along_beams (the default) "
+        "takes the range noise to lie along each point's beam (`fit_plane_along_beams`), "
+        "points treats the points as exact (total least squares, `fit_plane`), which tilts the "
+        "floor of a LiDAR that meets it obliquely from one side",
+    )
     ransac_iterations: int = Field(
         default=1000,
         ge=1,
@@ -221,6 +228,47 @@ def fit_plane(points: Points) -> tuple[NDArray[np.float64], float, float]:
     return normal, float(-normal @ centroid), rms
 
 
+def fit_plane_along_beams(
+    points: Points,
+    normal: NDArray[np.float64],
+    offset: float,
+    *,
+    iterations: int = 2,
+) -> tuple[NDArray[np.float64], float, float]:
+    """The plane `normal . x + offset = 0` refitted to (N >= 3, 3) points of one LiDAR in its own
+    frame (seen from the origin), starting from that plane: unit normal (oriented as `normal`),
+    offset and the RMS distance.
+
+    A LiDAR's noise lies along its beams. Least squares on the points themselves (`fit_plane`)
+    then tilts the plane wherever the beams meet it obliquely and from one side, as a LiDAR
+    pitched down at the floor meets it: a point's tangential coordinate and its distance to the
+    plane carry the same range error, so their product does not average out (on a 32-beam LiDAR
+    0.32 m above the floor with 3 cm of range noise, the floor came out 0.08 deg tilted at every
+    stop). Here the tangential coordinates are taken where each beam meets the current plane,
+    which the range noise does not move, so the distances' errors average out at the true plane
+    (an instrumental-variable fit); each step is linear, and a few from a plane within the
+    RANSAC band settle it.
+    """
+    directions = points / np.linalg.norm(points, axis=1, keepdims=True)
+    normal = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
+    distances = points @ normal + offset
+    for _ in range(iterations):
+        tangents = tangent_basis(normal)
+        incidence = directions @ normal
+        # A beam (nearly) parallel to the plane meets it nowhere near its point: keep the point.
+        along = distances / np.where(np.abs(incidence) > 1e-3, incidence, np.inf)
+        instruments = np.ones((len(points), 3))
+        instruments[:, :2] = (points - along[:, None] * directions) @ tangents
+        step = np.linalg.solve(instruments.T @ instruments, -(instruments.T @ distances))
+        updated = normal + tangents @ step[:2]
+        length = float(np.linalg.norm(updated))
+        normal = updated / length
+        offset = (offset + float(step[2])) / length
+        distances = points @ normal + offset
+    rms = float(np.sqrt(np.mean(distances**2)))
+    return normal, float(offset), rms
+
+
 def lower_envelope(points: Points, up: NDArray[np.float64], cell_m: float) -> NDArray[np.int64]:
     """Indices of the lowest of the (N, 3) `points` along `up` (3,, unit) in each square cell of
     edge `cell_m` across it: where walls and shelves fill the view the floor is a small part of
@@ -349,6 +397,11 @@ def _best_contender(
     return normal, offset
 
 
+ALONG_BEAMS_REFITS = 3
+"""How often `find_floor(along_beams=True)` takes the inliers about its last plane and fits the
+plane along their beams again."""
+
+
 def find_floor(
     points: Points,
     up: NDArray[np.float64],
@@ -364,6 +417,7 @@ def find_floor(
     envelope_points: int = 20_000,
     max_refits: int = 10,
     contenders: int = 5,
+    along_beams: bool = False,
 ) -> tuple[Plane, NDArray[np.bool_], float] | None:
     """RANSAC for the floor: the plane whose normal is within `max_tilt_deg` of `up` (3,) with
     most inliers and fewest points below it (`_floor_score`), drawn from the lower envelope
@@ -371,8 +425,11 @@ def find_floor(
 
     The `contenders` best hypotheses (scored on `scored_points` random points) are refitted on
     the envelope's random points and scored there again; the best is refitted on all `points`
-    (see `_refit`). Returns that plane (normal oriented along `up`), the inlier mask over `points`
-    and the inliers' RMS distance; None when no such plane has `min_points` inliers.
+    (see `_refit`; `along_beams`: the points are a LiDAR's in its own frame, and the plane is
+    fitted again on its inliers with their noise along the beams, `fit_plane_along_beams`,
+    `ALONG_BEAMS_REFITS` times). Returns that plane (normal oriented along `up`), the inlier
+    mask over `points` and the inliers' RMS distance; None when no such plane has `min_points`
+    inliers.
     """
     n = len(points)
     if n < max(3, min_points):
@@ -406,6 +463,12 @@ def find_floor(
     if refitted is None:
         return None
     normal, offset, rms = refitted
+    for _ in range(ALONG_BEAMS_REFITS if along_beams else 0):
+        # The band chooses the inliers: each refit takes them about the plane it last found.
+        index = np.flatnonzero(np.abs(points @ normal + offset) < distance_m)
+        if fit_points is not None and len(index) > fit_points:
+            index = index[rng.integers(0, len(index), size=fit_points)]
+        normal, offset, rms = fit_plane_along_beams(points[index], normal, offset)
     inliers = np.abs(points @ normal + offset) < distance_m
     if inliers.sum() < max(3, min_points) or normal @ up < np.cos(np.radians(max_tilt_deg)):
         return None
@@ -477,6 +540,7 @@ def fit_floor(
         fit_points=config.floor_fit_points,
         cell_m=config.floor_cell_m,
         envelope_points=config.floor_envelope_points,
+        along_beams=config.floor_fit == "along_beams",
     )
 
 

@@ -161,6 +161,7 @@ CONFIG_METHODS = (
     "surface_passes4",
     "surface_sensitivity",
     "without_model_sensitivity",
+    "floor_points",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -182,6 +183,8 @@ def method_config(method: str) -> PipelineConfig:
         data["segmentation"]["surface_model"] = "quadric"
     elif method == "beam_fit":
         data["segmentation"]["surface_model"] = "beam_fit"
+    elif method == "floor_points":
+        data["segmentation"]["floor_fit"] = "points"
     elif method in ("surface_k30", "surface_k120", "surface_k160"):
         data["segmentation"]["surface_neighbours"] = int(method.removeprefix("surface_k"))
     elif method == "surface_noise":

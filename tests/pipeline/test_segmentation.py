@@ -7,6 +7,8 @@ from pipeline.segmentation import (
     euclidean_clusters,
     find_floor,
     fit_floor,
+    fit_plane,
+    fit_plane_along_beams,
     patch_neighbours,
     segment,
     segment_on_floor,
@@ -23,6 +25,62 @@ def test_clusters_split_at_gaps_and_join_within_the_radius() -> None:
     assert len(np.unique(labels[:300])) == 1
     assert len(np.unique(labels[300:])) == 1
     assert labels[0] != labels[300]
+
+
+def _floor_seen_obliquely_from_one_side(
+    range_noise_m: float, n: int = 200_000
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """A floor 0.32 m below a LiDAR that sees it ahead only (0.3-1.5 m away, +-60 deg), with
+    Gaussian range noise along the beams: points, the floor's normal and offset."""
+    rng = np.random.default_rng(3)
+    height = 0.32
+    distance = rng.uniform(0.3, 1.5, n)
+    bearing = np.radians(rng.uniform(-60.0, 60.0, n))
+    floor = np.column_stack(
+        [distance * np.cos(bearing), distance * np.sin(bearing), -np.full(n, height)]
+    )
+    ranges = np.linalg.norm(floor, axis=1, keepdims=True)
+    noisy = floor / ranges * (ranges + rng.normal(0.0, range_noise_m, (n, 1)))
+    return noisy, np.array([0.0, 0.0, 1.0]), height
+
+
+def _tilt_deg(normal: NDArray[np.float64], truth: NDArray[np.float64]) -> float:
+    return float(np.degrees(np.arccos(min(1.0, abs(float(normal @ truth))))))
+
+
+def test_range_noise_tilts_a_least_squares_floor_but_not_one_fitted_along_the_beams() -> None:
+    points, normal, offset = _floor_seen_obliquely_from_one_side(range_noise_m=0.03)
+    least_squares, _, _ = fit_plane(points)
+    assert _tilt_deg(least_squares, normal) > 0.1
+    start = normal + np.array([0.01, -0.01, 0.0])  # about 0.8 deg off, as RANSAC leaves it
+    along, along_offset, rms = fit_plane_along_beams(points, start / np.linalg.norm(start), 0.3)
+    assert _tilt_deg(along, normal) < 0.02
+    assert along_offset == pytest.approx(offset, abs=2e-4)
+    assert along @ normal > 0  # oriented as the start
+    assert 0.005 < rms < 0.03
+
+
+def test_a_floor_fitted_along_the_beams_is_exact_without_noise() -> None:
+    points, normal, offset = _floor_seen_obliquely_from_one_side(range_noise_m=0.0, n=1000)
+    along, along_offset, rms = fit_plane_along_beams(points, normal, offset + 0.01)
+    assert _tilt_deg(along, normal) < 1e-6
+    assert along_offset == pytest.approx(offset, abs=1e-9)
+    assert rms < 1e-9
+
+
+def test_find_floor_fits_along_the_beams_when_asked() -> None:
+    points, normal, _ = _floor_seen_obliquely_from_one_side(range_noise_m=0.03)
+    settings = dict(
+        distance_m=0.02, iterations=200, scored_points=2000, max_tilt_deg=30, min_points=100
+    )
+    tilts = {}
+    for along_beams in (False, True):
+        found = find_floor(
+            points, normal, rng=np.random.default_rng(0), along_beams=along_beams, **settings
+        )
+        assert found is not None
+        tilts[along_beams] = _tilt_deg(found[0].normal, normal)
+    assert tilts[True] < 0.05 < tilts[False]
 
 
 def test_floor_is_the_plane_facing_up_not_the_larger_wall() -> None:
