@@ -259,7 +259,10 @@ def fit_plane_along_beams(
         along = distances / np.where(np.abs(incidence) > 1e-3, incidence, np.inf)
         instruments = np.ones((len(points), 3))
         instruments[:, :2] = (points - along[:, None] * directions) @ tangents
-        step = np.linalg.solve(instruments.T @ instruments, -(instruments.T @ distances))
+        # lstsq: a floor seen along one line leaves a tilt undetermined; it then stays put.
+        step = np.linalg.lstsq(
+            instruments.T @ instruments, -(instruments.T @ distances), rcond=1e-12
+        )[0]
         updated = normal + tangents @ step[:2]
         length = float(np.linalg.norm(updated))
         normal = updated / length

@@ -68,6 +68,17 @@ def test_a_floor_fitted_along_the_beams_is_exact_without_noise() -> None:
     assert rms < 1e-9
 
 
+def test_a_floor_seen_along_one_line_keeps_its_undetermined_tilt() -> None:
+    along_x = np.linspace(0.5, 2.0, 50)
+    points = np.column_stack([along_x, np.zeros(50), np.full(50, -0.5)])
+    start = np.array([0.0, 0.01, 1.0])
+    start /= np.linalg.norm(start)
+    normal, offset, rms = fit_plane_along_beams(points, start, 0.5)
+    assert np.all(np.isfinite(normal)) and np.isfinite(offset)
+    assert normal[1] == pytest.approx(start[1], abs=1e-5)  # the tilt about x: nothing fixes it
+    assert rms < 1e-9
+
+
 def test_find_floor_fits_along_the_beams_when_asked() -> None:
     points, normal, _ = _floor_seen_obliquely_from_one_side(range_noise_m=0.03)
     settings = dict(
