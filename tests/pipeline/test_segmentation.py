@@ -81,13 +81,18 @@ def test_a_floor_seen_along_one_line_keeps_its_undetermined_tilt() -> None:
 
 def test_find_floor_fits_along_the_beams_when_asked() -> None:
     points, normal, _ = _floor_seen_obliquely_from_one_side(range_noise_m=0.03)
-    settings = dict(
-        distance_m=0.02, iterations=200, scored_points=2000, max_tilt_deg=30, min_points=100
-    )
     tilts = {}
     for along_beams in (False, True):
         found = find_floor(
-            points, normal, rng=np.random.default_rng(0), along_beams=along_beams, **settings
+            points,
+            normal,
+            distance_m=0.02,
+            iterations=200,
+            scored_points=2000,
+            max_tilt_deg=30,
+            min_points=100,
+            rng=np.random.default_rng(0),
+            along_beams=along_beams,
         )
         assert found is not None
         tilts[along_beams] = _tilt_deg(found[0].normal, normal)
