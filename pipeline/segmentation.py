@@ -233,7 +233,7 @@ def fit_plane_along_beams(
     normal: NDArray[np.float64],
     offset: float,
     *,
-    iterations: int = 2,
+    iterations: int = 1,
 ) -> tuple[NDArray[np.float64], float, float]:
     """The plane `normal . x + offset = 0` refitted to (N >= 3, 3) points of one LiDAR in its own
     frame (seen from the origin), starting from that plane: unit normal (oriented as `normal`),
@@ -246,28 +246,30 @@ def fit_plane_along_beams(
     0.32 m above the floor with 3 cm of range noise, the floor came out 0.08 deg tilted at every
     stop). Here the tangential coordinates are taken where each beam meets the current plane,
     which the range noise does not move, so the distances' errors average out at the true plane
-    (an instrumental-variable fit); each step is linear, and a few from a plane within the
-    RANSAC band settle it.
+    (an instrumental-variable fit); each of the `iterations` steps is linear, and a few from a
+    plane within the RANSAC band settle it.
     """
     directions = points / np.linalg.norm(points, axis=1, keepdims=True)
     normal = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
-    distances = points @ normal + offset
     for _ in range(iterations):
-        tangents = tangent_basis(normal)
-        incidence = directions @ normal
+        # Coordinates along two tangents and the normal: of the points, and of their beams.
+        axes = np.column_stack([tangent_basis(normal), normal])
+        local = points @ axes
+        beams = directions @ axes
+        distances = local[:, 2] + offset
         # A beam (nearly) parallel to the plane meets it nowhere near its point: keep the point.
-        along = distances / np.where(np.abs(incidence) > 1e-3, incidence, np.inf)
+        along = distances / np.where(np.abs(beams[:, 2]) > 1e-3, beams[:, 2], np.inf)
         instruments = np.ones((len(points), 3))
-        instruments[:, :2] = (points - along[:, None] * directions) @ tangents
+        instruments[:, :2] = local[:, :2] - along[:, None] * beams[:, :2]
         # lstsq: a floor seen along one line leaves a tilt undetermined; it then stays put.
         step = np.linalg.lstsq(
             instruments.T @ instruments, -(instruments.T @ distances), rcond=1e-12
         )[0]
-        updated = normal + tangents @ step[:2]
+        updated = normal + axes[:, :2] @ step[:2]
         length = float(np.linalg.norm(updated))
         normal = updated / length
         offset = (offset + float(step[2])) / length
-        distances = points @ normal + offset
+    distances = points @ normal + offset
     rms = float(np.sqrt(np.mean(distances**2)))
     return normal, float(offset), rms
 
@@ -400,9 +402,35 @@ def _best_contender(
     return normal, offset
 
 
-ALONG_BEAMS_REFITS = 3
+ALONG_BEAMS_REFITS = 4
 """How often `find_floor(along_beams=True)` takes the inliers about its last plane and fits the
 plane along their beams again."""
+
+
+def _refit_along_beams(
+    points: Points,
+    plane: tuple[NDArray[np.float64], float, float],
+    *,
+    distance_m: float,
+    fit_points: int | None,
+    rng: np.random.Generator,
+) -> tuple[NDArray[np.float64], float, float]:
+    """`plane` (normal, offset, RMS) fitted `ALONG_BEAMS_REFITS` times along the beams
+    (`fit_plane_along_beams`) to its inliers among (N, 3) `points`, each time those within
+    `distance_m` of the last plane. They are drawn from the points within twice the band of the
+    first plane, once (at most `fit_points` of them): the refits move the plane by far less than
+    the band, and a pass over a whole cloud per refit costs more than the fit."""
+    normal, offset, rms = plane
+    index = np.flatnonzero(np.abs(points @ normal + offset) < 2.0 * distance_m)
+    if fit_points is not None and len(index) > fit_points:
+        index = index[rng.integers(0, len(index), size=fit_points)]
+    near = points[index]
+    for _ in range(ALONG_BEAMS_REFITS):
+        inliers = near[np.abs(near @ normal + offset) < distance_m]
+        if len(inliers) < 3:
+            break
+        normal, offset, rms = fit_plane_along_beams(inliers, normal, offset)
+    return normal, offset, rms
 
 
 def find_floor(
@@ -466,12 +494,10 @@ def find_floor(
     if refitted is None:
         return None
     normal, offset, rms = refitted
-    for _ in range(ALONG_BEAMS_REFITS if along_beams else 0):
-        # The band chooses the inliers: each refit takes them about the plane it last found.
-        index = np.flatnonzero(np.abs(points @ normal + offset) < distance_m)
-        if fit_points is not None and len(index) > fit_points:
-            index = index[rng.integers(0, len(index), size=fit_points)]
-        normal, offset, rms = fit_plane_along_beams(points[index], normal, offset)
+    if along_beams:
+        normal, offset, rms = _refit_along_beams(
+            points, (normal, offset, rms), distance_m=distance_m, fit_points=fit_points, rng=rng
+        )
     inliers = np.abs(points @ normal + offset) < distance_m
     if inliers.sum() < max(3, min_points) or normal @ up < np.cos(np.radians(max_tilt_deg)):
         return None
