@@ -83,19 +83,9 @@ def test_find_floor_fits_along_the_beams_when_asked() -> None:
     points, normal, _ = _floor_seen_obliquely_from_one_side(range_noise_m=0.03)
     tilts = {}
     for along_beams in (False, True):
-        found = find_floor(
-            points,
-            normal,
-            distance_m=0.02,
-            iterations=200,
-            scored_points=2000,
-            max_tilt_deg=30,
-            min_points=100,
-            rng=np.random.default_rng(0),
-            along_beams=along_beams,
-        )
+        found = _floor_of(points, normal, iterations=200, along_beams=along_beams)
         assert found is not None
-        tilts[along_beams] = _tilt_deg(found[0].normal, normal)
+        tilts[along_beams] = _tilt_deg(found[0], normal)
     assert tilts[True] < 0.05 < tilts[False]
 
 
@@ -190,7 +180,12 @@ def _room(rng: np.random.Generator, floor_points: int) -> tuple[np.ndarray, np.n
 
 
 def _floor_of(
-    points: np.ndarray, up: np.ndarray, *, iterations: int = 100, seed: int = 0
+    points: np.ndarray,
+    up: np.ndarray,
+    *,
+    iterations: int = 100,
+    seed: int = 0,
+    along_beams: bool = False,
 ) -> tuple[np.ndarray, float] | None:
     found = find_floor(
         points,
@@ -201,6 +196,7 @@ def _floor_of(
         max_tilt_deg=30,
         min_points=100,
         rng=np.random.default_rng(seed),
+        along_beams=along_beams,
     )
     return None if found is None else (found[0].normal, found[0].offset)
 
