@@ -87,6 +87,27 @@ def test_a_bare_floor_leaves_x_y_and_yaw_undetermined_and_only_those() -> None:
     assert max(other.uncertainty.stddev_rotation_deg[:2]) < 0.1
 
 
+def test_a_lidar_free_only_together_with_a_group_of_stops_is_undetermined() -> None:
+    # A lane driven out and back, each LiDAR seeing one side each way: the objects tie the
+    # LiDAR's shift to the return leg's stops and to nothing else, so the LiDAR and those stops
+    # slide together. The weak prior of the stops must not hold the LiDAR through them.
+    layout = ParameterLayout(n_stops=9, n_lidars=2)
+    free = np.zeros(layout.size)
+    for stop in range(5, 9):
+        free[layout.stop(stop)] = 1.0
+    free[layout.lidar(1)] = 1.0
+    free /= np.linalg.norm(free)
+    information = 1e6 * (np.eye(layout.size) - np.outer(free, free))
+    result = _result(
+        layout, np.tile(np.eye(4), (2, 1, 1)), information[None], np.zeros((1, layout.size))
+    )
+    config = ObservabilityConfig(method="formal")
+    _, lidar = pose_uncertainties(result, np.eye(4), None, config)
+    assert lidar.undetermined == ("x",)
+    # With the whole prior on every stop the five poses' priors hold it to 1 m / sqrt(5).
+    np.testing.assert_allclose(lidar.stddev_translation_m[0], 1.0 / np.sqrt(5.0), rtol=1e-5)
+
+
 def test_the_jackknife_is_exact_leave_one_stop_out_on_a_linear_problem() -> None:
     # Residuals linear in the parameters: one Gauss-Newton step from the solution without stop j
     # lands exactly on the solution without stop j, so the jackknife must match brute force.
