@@ -151,6 +151,7 @@ CONFIG_METHODS = (
     "reference_pairs",
     "floor_measured",
     "extrinsic_convergence",
+    "stop_prior",
     "global_alignment",
     "kernel_30mm",
     "kernel_sigmas",
@@ -220,6 +221,8 @@ def method_config(method: str) -> PipelineConfig:
             translation_tolerance_m=1e-5,
             rotation_tolerance_deg=1e-4,
         )
+    elif method == "stop_prior":
+        data["optimisation"]["stop_prior_sigma_m"] = 1.0
     elif method == "floor_measured":
         data["optimisation"]["floor_normal_sigma_deg"] = None
         data["optimisation"]["floor_offset_sigma_m"] = None
