@@ -16,7 +16,8 @@ Twists are `[rho (3), phi (3)]` applied on the left: `T_G_ref <- exp(d) T_G_ref`
 
 Modules, in the order the data flow through them: `config`; `objective` (the clouds and floor
 planes, `JointObjective`, placed in G for given poses); `association` (nearest-neighbour pairs);
-`residuals` (point and floor residuals, their Jacobians, the robust cost); `assembly` (the
+`pair_noise` (each pair's residual sigma, where `pair_weights` measures it); `residuals`
+(point and floor residuals, their Jacobians, the robust cost); `assembly` (the
 normal equations); `solver` (`optimise`: phases of Levenberg-Marquardt steps); `layout` and
 `result` (what it returns).
 """

@@ -11,9 +11,9 @@ from pipeline.optimisation.association import Pairs
 from pipeline.optimisation.objective import JointObjective, PlacedClouds
 from pipeline.optimisation.residuals import (
     floor_terms,
+    pair_weights_and_costs,
     point_jacobians,
     point_residuals,
-    robust_weight_and_cost,
 )
 from pipeline.optimisation.stop_prior import stop_prior_terms
 
@@ -44,10 +44,7 @@ def normal_equations(
         placed = objective.place(T_G_ref, T_ref_lidar)
     sorted_pairs, key = _grouped(objective, pairs)
     residual = point_residuals(objective.config.residual, sorted_pairs, placed)
-    weight, _ = robust_weight_and_cost(
-        np.linalg.norm(residual, axis=1), scale, objective.config.robust_loss
-    )
-    weight = weight / objective.config.point_sigma_m**2
+    weight, _ = pair_weights_and_costs(objective, sorted_pairs, residual, scale)
     jac = point_jacobians(objective, sorted_pairs, placed, T_G_ref)
     _add_point_groups(H, b, objective, key, jac, weight, residual)
     chi2 = float(np.sum(weight[:, None] * residual**2))
@@ -81,7 +78,7 @@ def _grouped(objective: JointObjective, pairs: Pairs) -> tuple[Pairs, NDArray[np
     target_lidar = objective.reference.lidar[pairs.target]
     key = (slice_of * layout.n_stops + target_stop) * layout.n_lidars + target_lidar
     order = np.argsort(key, kind="stable")
-    return Pairs(pairs.source[order], pairs.target[order], pairs.cross_error), key[order]
+    return pairs.take(order), key[order]
 
 
 def _add_point_groups(
@@ -159,7 +156,7 @@ def stop_contributions(
         touching = (source_stop == j) | (target_stop == j)
         if not touching.any() and not any(stop == j for _, stop, _ in objective.floor):
             continue
-        subset = Pairs(pairs.source[touching], pairs.target[touching], pairs.cross_error)
+        subset = pairs.take(touching)
         H[j], b[j], _, _ = normal_equations(
             objective, subset, stops, lidars, scale, ideal_floor=True, floor_stop=j, placed=placed
         )
@@ -194,7 +191,7 @@ def block_contributions(
     bounds = np.searchsorted(block_of[order], np.arange(len(blocks) + 1))
     for c in range(len(blocks)):
         rows = order[bounds[c] : bounds[c + 1]]
-        subset = Pairs(pairs.source[rows], pairs.target[rows], pairs.cross_error)
+        subset = pairs.take(rows)
         H[c], b[c], _, _ = normal_equations(
             objective, subset, stops, lidars, scale, with_floor=False, placed=placed
         )
@@ -235,10 +232,7 @@ def range_bias_terms(
         placed = objective.place(stops, lidars)
     sorted_pairs, key = _grouped(objective, pairs)
     residual = point_residuals(objective.config.residual, sorted_pairs, placed)
-    weight, _ = robust_weight_and_cost(
-        np.linalg.norm(residual, axis=1), scale, objective.config.robust_loss
-    )
-    weight = weight / objective.config.point_sigma_m**2
+    weight, _ = pair_weights_and_costs(objective, sorted_pairs, residual, scale)
     jac = point_jacobians(objective, sorted_pairs, placed, stops)
     src, tgt = objective.sources, objective.reference
     u_src = _rays_G(src.points, src.lidar, src.stop, stops, lidars)[sorted_pairs.source]

@@ -19,11 +19,19 @@ from pipeline.optimisation.objective import JointObjective, PlacedClouds
 
 @dataclass(frozen=True)
 class Pairs:
-    """Associations of one iteration: source rows, target rows in the reference map."""
+    """Associations of one iteration: source rows, target rows in the reference map, and where
+    measured (`pair_noise`), each pair's residual standard deviation `sigma` (m; None: every
+    pair's is `point_sigma_m`)."""
 
     source: NDArray[np.int64]
     target: NDArray[np.int64]
     cross_error: float  # eq. 11 over every non-reference point (no gate)
+    sigma: NDArray[np.float64] | None = None
+
+    def take(self, rows: NDArray[np.int64] | NDArray[np.bool_]) -> Pairs:
+        """The pairs at `rows` (indices or a mask), with their sigmas."""
+        sigma = None if self.sigma is None else self.sigma[rows]
+        return Pairs(self.source[rows], self.target[rows], self.cross_error, sigma)
 
 
 def associate(objective: JointObjective, placed: PlacedClouds) -> Pairs:

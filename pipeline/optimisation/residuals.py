@@ -41,6 +41,35 @@ def robust_weight_and_cost(
     return np.ones_like(distance), 0.5 * distance**2
 
 
+def pair_weights_and_costs(
+    objective: JointObjective, pairs: Pairs, residual: NDArray[np.float64], scale: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each pair's IRLS weight (1/m^2) and robust cost (whitened: the cost's units) for its
+    `residual` (n, rows). Where `pairs.sigma` is measured, each residual is first rescaled so
+    that its sigma reads `point_sigma_m`: a pair of sigma s weighs 1/s^2 near zero and leaves
+    the robust kernel at `scale` s / `point_sigma_m`."""
+    config = objective.config
+    distance = np.linalg.norm(residual, axis=1)
+    unit = config.point_sigma_m
+    if pairs.sigma is None:
+        weight, cost = robust_weight_and_cost(distance, scale, config.robust_loss)
+        return weight / unit**2, cost / unit**2
+    ratio = unit / pairs.sigma
+    weight, cost = robust_weight_and_cost(distance * ratio, scale, config.robust_loss)
+    return weight * ratio**2 / unit**2, cost / unit**2
+
+
+def whitened_residuals(
+    pairs: Pairs, residual: NDArray[np.float64], unit: float
+) -> NDArray[np.float64]:
+    """`residual` (n, rows) rescaled so that each pair's sigma reads `unit` (as they are where
+    `pairs.sigma` is None)."""
+    if pairs.sigma is None:
+        return residual
+    result: NDArray[np.float64] = residual * (unit / pairs.sigma)[:, None]
+    return result
+
+
 _CHI3_MEDIAN = 1.5382
 """Median of the norm of a 3-D standard normal vector (chi with 3 degrees of freedom)."""
 
@@ -201,9 +230,7 @@ def cost(
     if placed is None:
         placed = objective.place(T_G_ref, T_ref_lidar)
     residual = point_residuals(config.residual, pairs, placed)
-    _, point_cost = robust_weight_and_cost(
-        np.linalg.norm(residual, axis=1), scale, config.robust_loss
-    )
+    _, point_cost = pair_weights_and_costs(objective, pairs, residual, scale)
     floor_cost = 0.0
     if objective.floor:
         floor_residual, _ = floor_terms(objective, T_G_ref, T_ref_lidar, jacobians=False)
@@ -214,4 +241,4 @@ def cost(
             objective.stop_anchor, T_G_ref, objective.stop_sigma, jacobians=False
         )
         prior_cost = 0.5 * float(np.sum(prior_residual**2))
-    return float(np.sum(point_cost)) / config.point_sigma_m**2 + floor_cost + prior_cost
+    return float(np.sum(point_cost)) + floor_cost + prior_cost

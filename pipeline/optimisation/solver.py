@@ -21,7 +21,13 @@ from pipeline.optimisation.association import Pairs, associate
 from pipeline.optimisation.config import OptimisationConfig
 from pipeline.optimisation.layout import ParameterLayout
 from pipeline.optimisation.objective import JointObjective, PlacedClouds
-from pipeline.optimisation.residuals import cost, point_residuals, robust_sigma
+from pipeline.optimisation.pair_noise import with_lidar_pair_sigmas
+from pipeline.optimisation.residuals import (
+    cost,
+    point_residuals,
+    robust_sigma,
+    whitened_residuals,
+)
 from pipeline.optimisation.result import OptimisationResult
 from pipeline.transforms import Points
 
@@ -174,7 +180,7 @@ def _iterate(
     )
     run.converged = False
     placed = objective.place(run.stops, run.lidars)
-    pairs = associate(objective, placed)
+    pairs = _associate(objective, placed)
     while run.iteration < config.max_iterations:
         run.iteration += 1
         run.errors.append(pairs.cross_error)
@@ -189,7 +195,7 @@ def _iterate(
         )
         run.history.append(run.lidars.copy())
         placed = objective.place(run.stops, run.lidars)
-        pairs = associate(objective, placed)
+        pairs = _associate(objective, placed)
         if on_iteration is not None:
             on_iteration(run.iteration)
         if moved is None or (
@@ -199,6 +205,14 @@ def _iterate(
             break
 
 
+def _associate(objective: JointObjective, placed: PlacedClouds) -> Pairs:
+    """The pairs at the poses `placed`, with their sigmas where `pair_weights` measures them."""
+    pairs = associate(objective, placed)
+    if objective.config.pair_weights == "lidar_pairs":
+        return with_lidar_pair_sigmas(objective, pairs, placed)
+    return pairs
+
+
 def kernel_scale_floor(objective: JointObjective, pairs: Pairs, placed: PlacedClouds) -> float:
     """The smallest robust kernel scale (m) for the next step: `kernel_scale_min_m`, or
     `kernel_scale_min_sigmas` robust standard deviations of the residuals of `pairs` at the poses
@@ -206,7 +220,8 @@ def kernel_scale_floor(objective: JointObjective, pairs: Pairs, placed: PlacedCl
     config = objective.config
     if config.kernel_scale_min_sigmas is None or len(pairs.source) == 0:
         return config.kernel_scale_min_m
-    sigma = robust_sigma(point_residuals(config.residual, pairs, placed))
+    residual = point_residuals(config.residual, pairs, placed)
+    sigma = robust_sigma(whitened_residuals(pairs, residual, config.point_sigma_m))
     return max(config.kernel_scale_min_m, config.kernel_scale_min_sigmas * sigma)
 
 
@@ -217,7 +232,7 @@ def _result(
     information matrix, the per-stop parts of it and the variance factor."""
     layout, stops, lidars = objective.layout, run.stops, run.lidars
     placed = objective.place(stops, lidars)
-    pairs = associate(objective, placed)
+    pairs = _associate(objective, placed)
     run.errors.append(pairs.cross_error)
     H = np.zeros((layout.size, layout.size))
     gradient = np.zeros(layout.size)

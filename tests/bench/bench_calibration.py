@@ -152,6 +152,7 @@ CONFIG_METHODS = (
     "floor_measured",
     "extrinsic_convergence",
     "stop_prior",
+    "pair_weights",
     "global_alignment",
     "kernel_30mm",
     "kernel_sigmas",
@@ -221,6 +222,8 @@ def method_config(method: str) -> PipelineConfig:
             translation_tolerance_m=1e-5,
             rotation_tolerance_deg=1e-4,
         )
+    elif method == "pair_weights":
+        data["optimisation"]["pair_weights"] = "lidar_pairs"
     elif method == "stop_prior":
         data["optimisation"]["stop_prior_sigma_m"] = 1.0
     elif method == "floor_measured":
