@@ -49,13 +49,10 @@ def pair_weights_and_costs(
     that its sigma reads `point_sigma_m`: a pair of sigma s weighs 1/s^2 near zero and leaves
     the robust kernel at `scale` s / `point_sigma_m`."""
     config = objective.config
-    distance = np.linalg.norm(residual, axis=1)
     unit = config.point_sigma_m
-    if pairs.sigma is None:
-        weight, cost = robust_weight_and_cost(distance, scale, config.robust_loss)
-        return weight / unit**2, cost / unit**2
-    ratio = unit / pairs.sigma
-    weight, cost = robust_weight_and_cost(distance * ratio, scale, config.robust_loss)
+    ratio = 1.0 if pairs.sigma is None else unit / pairs.sigma
+    distance = np.linalg.norm(residual, axis=1) * ratio
+    weight, cost = robust_weight_and_cost(distance, scale, config.robust_loss)
     return weight * ratio**2 / unit**2, cost / unit**2
 
 
