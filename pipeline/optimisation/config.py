@@ -86,11 +86,12 @@ class OptimisationConfig(BaseModel):
     pair_weights: Literal["uniform", "lidar_pairs"] = Field(
         default="uniform",
         description="uniform: every point pair weighs 1/point_sigma_m^2; lidar_pairs: each pair "
-        "by the robust sigma of its pair of LiDARs' residuals, measured at every association "
-        "(`pipeline/optimisation/pair_noise.py`), so that a noisy LiDAR's map pulls the others "
-        "less; the points' mean weight stays that of uniform. Opt-in: on 23 bench_random "
-        "recordings it takes 18 within 5 mm / 0.1 deg against 17 (seed 1013 7.2 -> 4.4 mm) "
-        "but loses on loops of mixed LiDARs (seed 1032 5.7 -> 7.7 mm; docs/method.md)",
+        "by the robust sigma of its pair of LiDARs' inlier residuals, measured at "
+        "every association (`pipeline/optimisation/pair_noise.py`), so that a noisy "
+        "LiDAR's map pulls the others less; the points' mean weight stays that of "
+        "uniform. Opt-in: on 23 bench_random recordings it takes 18 within 5 mm / 0.1"
+        " deg against 17 (seed 1013 7.2 -> 4.4 mm) but loses on loops of mixed LiDARs"
+        " (seed 1032 5.7 -> 6.6 mm; docs/method.md)",
     )
     point_sigma_m: float = Field(
         default=0.01, gt=0, description="standard deviation of a point residual"

@@ -28,11 +28,21 @@ class WallPairs:
     from_lidar_1: np.ndarray
 
 
-def _pairs_on_the_wall() -> WallPairs:
+def _pairs_on_the_wall(behind: int = 0) -> WallPairs:
+    """`behind`: LiDAR 1 also sees that many times its wall points on a second wall 0.3 m
+    behind the first, which the reference does not see (its pairs there are 0.3 m long), and
+    the reference sees its wall as many times more densely."""
+
+    def seen(sigma: float, copies: int) -> np.ndarray:
+        return np.vstack([_scattered(wall_seen_from(0.0, rng), sigma, rng) for _ in range(copies)])
+
     rng = np.random.default_rng(1)
     objects = [
-        [_scattered(wall_seen_from(0.0, rng), 0.002, rng) for _ in range(2)],
-        [_scattered(wall_seen_from(0.0, rng), 0.020, rng) for _ in range(2)],
+        [seen(0.002, 1 + behind) for _ in range(2)],
+        [
+            np.vstack([seen(0.020, 1), *[wall_seen_from(-0.3, rng) for _ in range(behind)]])
+            for _ in range(2)
+        ],
     ]
     normals = [[np.tile(WALL_NORMAL, (len(c), 1)) for c in row] for row in objects]
     config = OptimisationConfig(max_points_per_cloud=None, pair_weights="lidar_pairs")
@@ -58,6 +68,17 @@ def test_each_pair_of_lidars_gets_the_scatter_of_its_residuals() -> None:
     ratio = sigma[from_lidar_1].mean() / sigma[~from_lidar_1].mean()
     np.testing.assert_allclose(ratio, np.hypot(20, 2) / np.hypot(2, 2), rtol=0.2)
     assert np.ptp(sigma[from_lidar_1]) == 0.0 and np.ptp(sigma[~from_lidar_1]) == 0.0
+
+
+def test_a_group_s_sigma_is_its_inliers_scatter_however_many_far_pairs_it_holds() -> None:
+    # Three far pairs for every near one: a median over all would read 0.3 m.
+    wall = _pairs_on_the_wall(behind=3)
+    near = np.linalg.norm(wall.residual, axis=1) < 0.1
+    to_reference = wall.from_lidar_1 & (wall.objective.reference.lidar[wall.measured.target] == 0)
+    assert np.count_nonzero(to_reference & ~near) > 2 * np.count_nonzero(to_reference & near)
+    own_reference = ~wall.from_lidar_1 & (wall.objective.reference.lidar[wall.measured.target] == 0)
+    ratio = wall.sigma[to_reference].mean() / wall.sigma[own_reference].mean()
+    np.testing.assert_allclose(ratio, np.hypot(20, 2) / np.hypot(2, 2), rtol=0.2)
 
 
 def test_the_pairs_weigh_by_their_sigma_and_as_much_as_before_on_average() -> None:
