@@ -7,8 +7,11 @@ from pathlib import Path
 import pytest
 
 from tests.bench.bench_random import (
+    DETERMINED,
+    UNDETERMINED,
     SeedResult,
     comparisons,
+    determination,
     grouped_table,
     parse_limits,
     parse_seeds,
@@ -148,9 +151,24 @@ def test_grouped_tables_have_a_row_per_group_and_one_over_all() -> None:
         "per sensors",
         "per errors",
         "per header clock",
+        "by what the data determines (the reported 1-sigma)",
     ):
         assert f"## proposed: {heading}" in text
     assert "## without_stage1: per scenario class" in text
+
+
+def test_recordings_are_told_apart_by_whether_every_reported_sigma_is_within_the_bar() -> None:
+    def with_stddev(mm: float, deg: float) -> SeedResult:
+        record = _record(1, 3.0, 0.05, True)
+        record.stddev = [[0.001, 0.001, 0.001, 0.01, 0.01, 0.01], [mm / 1000, 0, 0, 0, 0, deg]]
+        return record
+
+    assert determination(with_stddev(5.0, 0.1)) == DETERMINED
+    assert determination(with_stddev(5.1, 0.01)) == UNDETERMINED
+    assert determination(with_stddev(1.0, 0.11)) == UNDETERMINED
+    refused = _record(2, 0.0, 0.0, False)
+    refused.refused = "NoStopsError: no stops"
+    assert determination(refused) == "refused"
 
 
 def test_cached_results_are_read_back_not_recomputed(tmp_path: Path) -> None:
