@@ -89,9 +89,9 @@ class OptimisationConfig(BaseModel):
         "by the robust sigma of its pair of LiDARs' inlier residuals, measured at "
         "every association (`pipeline/optimisation/pair_noise.py`), so that a noisy "
         "LiDAR's map pulls the others less; the points' mean weight stays that of "
-        "uniform. Opt-in: on 23 bench_random recordings it takes 18 within 5 mm / 0.1"
-        " deg against 17 (seed 1013 7.2 -> 4.4 mm) but loses on loops of mixed LiDARs"
-        " (seed 1032 5.7 -> 6.6 mm; docs/method.md)",
+        "uniform. Opt-in: over the whole bench_random it ties uniform (93/100 within "
+        "5 mm / 0.1 deg; seed 1013 7.2 -> 4.4 mm, seed 1086 within -> 12.5 mm) and "
+        "moves the paper protocol's two spinning heads 3.0 -> 3.9 mm (docs/method.md)",
     )
     point_sigma_m: float = Field(
         default=0.01, gt=0, description="standard deviation of a point residual"
