@@ -9,6 +9,8 @@ For each seed the recording is synthesised once into `CACHE/recordings/rate-F/se
 recording left half-written is written again), then read from disk with `pipeline.io` and
 calibrated by each method, as a user's upload would be. Each (method, seed) result is kept in
 `CACHE/results/rate-F/METHOD/seed-N.json`, so an interrupted run resumes where it stopped.
+Results are kept by method name, not by code: each records the commit it was calibrated at
+(`code_version`), and the report warns when one method's results come from several.
 Seeds run in `--jobs` processes, each with one BLAS thread. A full-rate recording takes 0.4-0.9
 GB: one stays cached only while the cache's disk keeps `--keep-free-gb` free (else it is deleted
 once its methods have results, as with `--discard-recordings`), so a long run never fills the disk.
@@ -33,7 +35,9 @@ The error of a recording is, over its non-reference LiDARs, the largest error of
 **false pass**); failed and within 5 mm / 0.1 deg (a false fail); failed and worse. A recording
 the reader or the pipeline refuses counts as failed and as no success, in its own column.
 RMS of error / sigma: per LiDAR, the error over the norm of its reported 1-sigma (1 for an
-honest sigma). Seconds: read and calibrate, per recording.
+honest sigma). Seconds: read and calibrate, per recording. A last table per method splits the
+recordings by whether every LiDAR's reported 1-sigma is within the success bar
+(`determination`): what the data determines, by the pipeline's own estimate.
 """
 
 from __future__ import annotations
@@ -47,12 +51,14 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import shutil  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from dataclasses import asdict, dataclass, field, replace  # noqa: E402
+from functools import cache  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -114,6 +120,9 @@ class SeedResult:
     T_ref_lidar: list[list[list[float]]] = field(default_factory=list)
     """The calibrated poses of every LiDAR in the reference's frame (reference first): two
     methods' solutions compared on a seed without calibrating again."""
+    code: str = ""
+    """The code the result was calibrated with (`code_version`); "" in results cached before
+    it was recorded, or outside a git checkout."""
 
     @property
     def max_translation(self) -> float:
@@ -215,6 +224,7 @@ def run_seed(
             continue
         record = SeedResult(seed, method, spec.scenario_class, clock_kind(spec))
         record.world = world_name(spec) if world is not None else ""
+        record.code = code_version()
         started = time.perf_counter()
         try:
             config = method_config(method)
@@ -322,6 +332,38 @@ def parse_limits(text: str) -> dict[str, float]:
         except ValueError:
             raise SystemExit(f"--limits: {item!r} is not kind=number") from None
     return limits
+
+
+@cache
+def code_version() -> str:
+    """This checkout's commit, `-dirty` when it has uncommitted changes (`git describe --always
+    --dirty`); "" where git cannot tell."""
+    try:
+        done = subprocess.run(
+            ["git", "describe", "--always", "--dirty"],
+            cwd=Path(__file__).resolve().parents[2],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+    return done.stdout.strip()
+
+
+def mixed_code(records: Iterable[SeedResult]) -> list[str]:
+    """One warning per method whose results come from more than one code version (a cache
+    keeps a method's results by name: a run after a change reads the older ones back)."""
+    versions: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+    for record in records:
+        versions[record.method][record.code or "unknown"] += 1
+    return [
+        f"{method}'s results come from {len(counts)} code versions: "
+        + ", ".join(f"{code} ({n})" for code, n in sorted(counts.items()))
+        + f"; delete the cache's results/{method} to calibrate them again with this code"
+        for method, counts in sorted(versions.items())
+        if len(counts) > 1
+    ]
 
 
 def describe(record: SeedResult) -> str:
@@ -668,6 +710,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         + (f", verdicts judged with limits {args.limits}" if limits else "")
         + "\n"
     )
+    for warning in mixed_code(records):
+        print(f"**Warning**: {warning}.\n")
+        print(f"bench_random: {warning}", file=sys.stderr)
     print(report(records, args.methods))
 
 

@@ -13,6 +13,7 @@ from tests.bench.bench_random import (
     comparisons,
     determination,
     grouped_table,
+    mixed_code,
     parse_limits,
     parse_seeds,
     parse_worlds,
@@ -169,6 +170,18 @@ def test_recordings_are_told_apart_by_whether_every_reported_sigma_is_within_the
     refused = _record(2, 0.0, 0.0, False)
     refused.refused = "NoStopsError: no stops"
     assert determination(refused) == "refused"
+
+
+def test_results_of_one_method_from_several_code_versions_are_named() -> None:
+    records = [_record(seed, 1.0, 0.01, True) for seed in (1, 2, 3)]
+    records[0].code, records[1].code = "14a0a70", "14a0a70"
+    assert mixed_code(records) == [
+        "proposed's results come from 2 code versions: 14a0a70 (2), unknown (1); delete the "
+        "cache's results/proposed to calibrate them again with this code"
+    ]
+    records[2].code = "14a0a70"
+    other = _record(1, 1.0, 0.01, True, method="pair_weights")
+    assert mixed_code([*records, other]) == []
 
 
 def test_cached_results_are_read_back_not_recomputed(tmp_path: Path) -> None:
