@@ -60,6 +60,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from dataclasses import asdict, dataclass, field, replace  # noqa: E402
 from functools import cache  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import TYPE_CHECKING  # noqa: E402
 
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
@@ -71,7 +72,12 @@ from tests.bench.bench_calibration import (  # noqa: E402
     calibration_errors,
     method_config,
     paired_table,
+    true_T_ref_lidar,
 )
+
+if TYPE_CHECKING:
+    from pipeline.calibrate import CalibrationResult
+    from pipeline.synth.truth import Truth
 
 SUCCESS = (0.005, 0.1)
 """Within this translation (m) and rotation (deg) error a calibration succeeded."""
@@ -123,6 +129,12 @@ class SeedResult:
     code: str = ""
     """The code the result was calibrated with (`code_version`); "" in results cached before
     it was recorded, or outside a git checkout."""
+    along_reference_axis: list[float] = field(default_factory=list)
+    """Per non-reference LiDAR, its translation error (m, estimate - truth of `T_ref_lidar`)
+    along the reference's optical axis; empty in results cached before it was recorded."""
+    reference_model: str = ""
+    """The reference LiDAR's model (`livox-mid70`, ...): its optical axis means a direction of
+    view only for a head that looks one way."""
 
     @property
     def max_translation(self) -> float:
@@ -233,7 +245,12 @@ def run_seed(
         except PipelineError as err:
             record.refused = f"{type(err).__name__}: {err}"
         else:
-            t, r, sigma_t, sigma_r = calibration_errors(result, load_truth(directory))
+            truth = load_truth(directory)
+            t, r, sigma_t, sigma_r = calibration_errors(result, truth)
+            record.along_reference_axis = along_reference_axis(result, truth)
+            record.reference_model = next(
+                x.model for x in truth.lidars if x.frame == result.lidars[0].frame
+            )
             record.translation, record.rotation = t, r
             record.sigma_translation, record.sigma_rotation = sigma_t, sigma_r
             record.T_ref_lidar = calibrated_T_ref_lidar(result).tolist()
@@ -263,6 +280,20 @@ def run_seed(
     ):
         shutil.rmtree(directory)
     return results
+
+
+def along_reference_axis(result: CalibrationResult, truth: Truth) -> list[float]:
+    """Per non-reference LiDAR of `result`, the translation error of its `T_ref_lidar` (m,
+    estimate - truth, in the reference's frame) along the reference's optical axis.
+
+    A range bias of the reference's surfaces (behind or in front of the true ones along its
+    beams) moves every other LiDAR the same way along the reference's view: the mean of this
+    over recordings whose reference looks one way shows such a bias, where errors of either
+    sign from chance average out."""
+    frames = [x.frame for x in result.lidars]
+    axis = next(x.optical_axis for x in truth.lidars if x.frame == frames[0])
+    error = calibrated_T_ref_lidar(result)[1:, :3, 3] - true_T_ref_lidar(truth, frames)[1:, :3, 3]
+    return [float(e) for e in error @ (axis / np.linalg.norm(axis))]
 
 
 def distance_histogram(capped: NDArray[np.float64], cap_m: float) -> list[int]:
@@ -479,6 +510,8 @@ def report(records: Sequence[SeedResult], methods: Sequence[str]) -> str:
         out.append(grouped_table(mine, lambda r: r.clock, "clock"))
         out.append(f"\n## {method}: by what the data determines (the reported 1-sigma)\n")
         out.append(grouped_table(mine, determination, "reported 1-sigma"))
+        out.append(f"\n## {method}: error along the reference's optical axis, by its model\n")
+        out.append(axis_bias_table(mine))
         out.append("")
     for method, baseline in comparisons(methods):
         out.append(f"## {method} against {baseline}, recording by recording\n")
@@ -490,6 +523,39 @@ def report(records: Sequence[SeedResult], methods: Sequence[str]) -> str:
             out.append(world_pairs_table([r for r in records if r.method == method]))
             out.append("")
     return "\n".join(out)
+
+
+def axis_bias_row(label: str, records: Sequence[SeedResult]) -> str:
+    """Recordings, LiDARs, and the signed error along the reference's optical axis (mm): the
+    mean over recordings of each recording's mean over its LiDARs (its LiDARs share one
+    reference map, so they are not independent) with its standard error, the median over
+    LiDARs, and the share of recordings whose mean is positive."""
+    means = [1000 * float(np.mean(r.along_reference_axis)) for r in records]
+    lidars = [1000 * v for r in records for v in r.along_reference_axis]
+    n = len(means)
+    if n == 0:
+        return f"| {label} | 0 | 0 | n/a | n/a | n/a | n/a |"
+    stderr = float(np.std(means, ddof=1) / math.sqrt(n)) if n > 1 else float("nan")
+    positive = sum(m > 0 for m in means)
+    return (
+        f"| {label} | {n} | {len(lidars)} | {np.mean(means):+.2f} | {stderr:.2f} "
+        f"| {np.median(lidars):+.2f} | {positive}/{n} |"
+    )
+
+
+def axis_bias_table(records: Iterable[SeedResult]) -> str:
+    """`axis_bias_row` per reference model, then over all, of the calibrated recordings that
+    recorded the error along the axis (results cached before it was recorded are left out)."""
+    measured = [r for r in records if r.refused is None and r.along_reference_axis]
+    groups: dict[str, list[SeedResult]] = defaultdict(list)
+    for record in measured:
+        groups[record.reference_model].append(record)
+    header = (
+        "| reference | recordings | LiDARs | mean error along its axis (mm) | standard error "
+        "| median over LiDARs | recordings positive |\n|---|---|---|---|---|---|---|"
+    )
+    rows = [axis_bias_row(model, groups[model]) for model in sorted(groups)]
+    return "\n".join([header, *rows, axis_bias_row("**all**", measured)])
 
 
 DETERMINED = f"every 1-sigma within {1000 * SUCCESS[0]:g} mm / {SUCCESS[1]:g} deg"

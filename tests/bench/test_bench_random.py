@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any, cast
 
+import numpy as np
 import pytest
 
 from tests.bench.bench_random import (
     DETERMINED,
     UNDETERMINED,
     SeedResult,
+    along_reference_axis,
+    axis_bias_table,
     comparisons,
     determination,
     grouped_table,
@@ -153,6 +158,7 @@ def test_grouped_tables_have_a_row_per_group_and_one_over_all() -> None:
         "per errors",
         "per header clock",
         "by what the data determines (the reported 1-sigma)",
+        "error along the reference's optical axis, by its model",
     ):
         assert f"## proposed: {heading}" in text
     assert "## without_stage1: per scenario class" in text
@@ -170,6 +176,56 @@ def test_recordings_are_told_apart_by_whether_every_reported_sigma_is_within_the
     refused = _record(2, 0.0, 0.0, False)
     refused.refused = "NoStopsError: no stops"
     assert determination(refused) == "refused"
+
+
+def _pose(x: float, y: float, yaw_deg: float) -> np.ndarray[Any, np.dtype[np.float64]]:
+    yaw = np.radians(yaw_deg)
+    pose = np.eye(4)
+    pose[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    pose[:2, 3] = [x, y]
+    return pose
+
+
+def test_the_error_along_the_reference_s_axis_is_signed_and_in_its_frame() -> None:
+    # The reference looks along base +y (yaw 90 deg, optical axis +x in its frame); the other
+    # LiDAR is calibrated 3 mm too far along base +y and 2 mm off along base x.
+    reference = _pose(0.0, 0.0, 90.0)
+    true_other = _pose(0.5, 0.0, 0.0)
+    calibrated_other = _pose(0.502, 0.003, 0.0)
+    lidar = SimpleNamespace
+    truth = lidar(
+        lidars=[
+            lidar(frame="front", T_base_lidar_true=reference, optical_axis=np.array([2.0, 0, 0])),
+            lidar(frame="side", T_base_lidar_true=true_other, optical_axis=np.array([1.0, 0, 0])),
+        ]
+    )
+    result = lidar(
+        lidars=[
+            lidar(frame="front", T_base_lidar_calibrated=reference),
+            lidar(frame="side", T_base_lidar_calibrated=calibrated_other),
+        ]
+    )
+    (along,) = along_reference_axis(cast(Any, result), cast(Any, truth))
+    assert along == pytest.approx(0.003)
+
+
+def test_the_axis_table_averages_recordings_not_lidars_and_groups_by_reference_model() -> None:
+    records = []
+    for seed, along, model in (
+        (1, [0.002, 0.004], "livox-mid70"),
+        (2, [0.001], "livox-mid70"),
+        (3, [-0.001], "spinning"),
+    ):
+        record = _record(seed, 3.0, 0.05, True)
+        record.along_reference_axis, record.reference_model = along, model
+        records.append(record)
+    old = _record(4, 3.0, 0.05, True)  # cached before the error along the axis was recorded
+    lines = axis_bias_table([*records, old]).splitlines()
+    mid70, spinning, everything = (_cells(line) for line in lines[2:])
+    # Recording means 3 and 1 mm: mean 2, standard error 1 (sample std sqrt(2) over sqrt(2)).
+    assert mid70 == ["livox-mid70", "2", "3", "+2.00", "1.00", "+2.00", "2/2"]
+    assert spinning[:4] == ["spinning", "1", "1", "-1.00"]
+    assert everything[:3] == ["**all**", "3", "4"]
 
 
 def test_results_of_one_method_from_several_code_versions_are_named() -> None:
