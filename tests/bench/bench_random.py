@@ -535,18 +535,19 @@ def axis_bias_row(label: str, records: Sequence[SeedResult]) -> str:
     n = len(means)
     if n == 0:
         return f"| {label} | 0 | 0 | n/a | n/a | n/a | n/a |"
-    stderr = float(np.std(means, ddof=1) / math.sqrt(n)) if n > 1 else float("nan")
+    stderr = f"{np.std(means, ddof=1) / math.sqrt(n):.2f}" if n > 1 else "n/a"
     positive = sum(m > 0 for m in means)
     return (
-        f"| {label} | {n} | {len(lidars)} | {np.mean(means):+.2f} | {stderr:.2f} "
+        f"| {label} | {n} | {len(lidars)} | {np.mean(means):+.2f} | {stderr} "
         f"| {np.median(lidars):+.2f} | {positive}/{n} |"
     )
 
 
 def axis_bias_table(records: Iterable[SeedResult]) -> str:
-    """`axis_bias_row` per reference model, then over all, of the calibrated recordings that
-    recorded the error along the axis (results cached before it was recorded are left out)."""
-    measured = [r for r in records if r.refused is None and r.along_reference_axis]
+    """`axis_bias_row` per reference model, then over all, of the recordings within
+    `PASS_OK` (a wrong basin, metres off, says nothing of a millimetre bias) that recorded the
+    error along the axis (results cached before it was recorded are left out)."""
+    measured = [r for r in records if r.within(PASS_OK) and r.along_reference_axis]
     groups: dict[str, list[SeedResult]] = defaultdict(list)
     for record in measured:
         groups[record.reference_model].append(record)

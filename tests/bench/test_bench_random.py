@@ -209,7 +209,7 @@ def test_the_error_along_the_reference_s_axis_is_signed_and_in_its_frame() -> No
     assert along == pytest.approx(0.003)
 
 
-def test_the_axis_table_averages_recordings_not_lidars_and_groups_by_reference_model() -> None:
+def test_the_axis_table_averages_recordings_groups_by_reference_and_leaves_wrong_basins_out() -> None:
     records = []
     for seed, along, model in (
         (1, [0.002, 0.004], "livox-mid70"),
@@ -220,11 +220,13 @@ def test_the_axis_table_averages_recordings_not_lidars_and_groups_by_reference_m
         record.along_reference_axis, record.reference_model = along, model
         records.append(record)
     old = _record(4, 3.0, 0.05, True)  # cached before the error along the axis was recorded
-    lines = axis_bias_table([*records, old]).splitlines()
+    lost = _record(5, 2000.0, 0.05, False)  # a wrong basin, 2 m off
+    lost.along_reference_axis, lost.reference_model = [2.0], "livox-mid70"
+    lines = axis_bias_table([*records, old, lost]).splitlines()
     mid70, spinning, everything = (_cells(line) for line in lines[2:])
     # Recording means 3 and 1 mm: mean 2, standard error 1 (sample std sqrt(2) over sqrt(2)).
     assert mid70 == ["livox-mid70", "2", "3", "+2.00", "1.00", "+2.00", "2/2"]
-    assert spinning[:4] == ["spinning", "1", "1", "-1.00"]
+    assert spinning == ["spinning", "1", "1", "-1.00", "n/a", "-1.00", "0/1"]
     assert everything[:3] == ["**all**", "3", "4"]
 
 
