@@ -176,10 +176,11 @@ class SegmentationConfig(BaseModel):
         "own range noise over its point spacing (both measured on the cloud, "
         "`patch_neighbours`), which keeps the tilt that noise gives a patch's normal the same: "
         "noisier LiDARs get larger patches, sparse clouds smaller ones (a fixed count spans a "
-        "wider, more curved piece of surface there). Opt-in: over bench_random seeds 1000-1099 "
-        "91/100 within 5 mm / 0.1 deg against 89, 0.29 mm nearer recording by recording, no "
-        "false pass, but false fails 12 against 8, the driven routine of the paper protocol "
-        "4.15 mm against 2.98, and twice the seconds (docs/method.md)",
+        "wider, more curved piece of surface there). Opt-in: with today's other defaults, over "
+        "80 of bench_random's seeds 1000-1099, 75/80 within 5 mm / 0.1 deg against 73, no false "
+        "pass, but false fails 5 against 3, two lanes lost, the driven routine of the paper "
+        "protocol 4.28 mm against 3.11 (over its 3.9 mm), and up to twice the seconds "
+        "(docs/method.md)",
     )
     surface_debias: Literal["none", "bootstrap"] = Field(
         default="none",
