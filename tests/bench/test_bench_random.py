@@ -209,7 +209,7 @@ def test_the_error_along_the_reference_s_axis_is_signed_and_in_its_frame() -> No
     assert along == pytest.approx(0.003)
 
 
-def test_the_axis_table_averages_recordings_groups_by_reference_and_leaves_wrong_basins_out() -> None:
+def test_the_axis_table_averages_recordings_per_reference_without_wrong_basins() -> None:
     records = []
     for seed, along, model in (
         (1, [0.002, 0.004], "livox-mid70"),
