@@ -197,6 +197,14 @@ class OptimisationConfig(BaseModel):
         default=1e-3, gt=0, description="the coarse phase only has to get close: it stops here"
     )
     coarse_rotation_tolerance_deg: float = Field(default=1e-2, gt=0, description="...and here")
+    acceleration: Literal["none", "anderson"] = Field(
+        default="none",
+        description="anderson (opt-in): once the robust kernel is at its floor in the final "
+        "phase, each step's poses are extrapolated from the last `anderson_depth` steps "
+        "(Anderson acceleration of the pair-then-step iteration), kept only where their cost "
+        "with fresh pairs is lower than the plain step's (`pipeline/optimisation/acceleration.py`)",
+    )
+    anderson_depth: int = Field(default=5, ge=1, le=20, description="steps extrapolated from")
     initial_damping: float = Field(
         default=1e-4, ge=0, description="Levenberg-Marquardt lambda at start"
     )

@@ -53,3 +53,5 @@ class OptimisationResult:
     residual_rms_m: float
     seconds: float
     kernel_scale_m: float
+    accelerated_steps: int = 0
+    """Steps whose poses Anderson acceleration extrapolated (`OptimisationConfig.acceleration`)."""

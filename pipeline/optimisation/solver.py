@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.geometry import Plane, exp_se3
+from pipeline.optimisation.acceleration import AndersonAcceleration
 from pipeline.optimisation.assembly import (
     block_contributions,
     normal_equations,
@@ -143,6 +144,7 @@ class _Run:
     errors: list[float] = field(default_factory=list)
     converged: bool = False
     iteration: int = 0
+    accelerated: int = 0  # steps Anderson acceleration extrapolated
 
     @classmethod
     def start(
@@ -181,6 +183,9 @@ def _iterate(
     run.converged = False
     placed = objective.place(run.stops, run.lidars)
     pairs = _associate(objective, placed)
+    anderson = AndersonAcceleration(
+        objective.layout, (run.stops, run.lidars), config.anderson_depth
+    )
     while run.iteration < config.max_iterations:
         run.iteration += 1
         run.errors.append(pairs.cross_error)
@@ -190,12 +195,27 @@ def _iterate(
         run.scale = max(
             floor, config.kernel_scale_initial_m * config.kernel_scale_decay ** (run.iteration - 1)
         )
+        before = (run.stops, run.lidars)
         run.stops, run.lidars, moved, run.damping = lm_step(
             objective, pairs, run.stops, run.lidars, run.scale, run.damping, placed
         )
-        run.history.append(run.lidars.copy())
         placed = objective.place(run.stops, run.lidars)
         pairs = _associate(objective, placed)
+        if config.acceleration == "anderson" and last and run.scale <= floor and moved is not None:
+            # Only at the final kernel: before it the map x -> G(x) changes every step.
+            proposed = anderson.propose(before, (run.stops, run.lidars))
+            if proposed is not None:
+                proposed_placed = objective.place(*proposed)
+                proposed_pairs = _associate(objective, proposed_placed)
+                plain = cost(objective, pairs, run.stops, run.lidars, run.scale, placed)
+                if cost(objective, proposed_pairs, *proposed, run.scale, proposed_placed) < plain:
+                    run.stops, run.lidars = proposed
+                    placed, pairs = proposed_placed, proposed_pairs
+                    moved = _motion(objective, before, proposed)
+                    run.accelerated += 1
+                else:
+                    anderson.keep_last()
+        run.history.append(run.lidars.copy())
         if on_iteration is not None:
             on_iteration(run.iteration)
         if moved is None or (
@@ -278,6 +298,7 @@ def _result(
         residual_rms_m=residual_rms,
         seconds=time.perf_counter() - started,
         kernel_scale_m=run.scale,
+        accelerated_steps=run.accelerated,
     )
 
 
@@ -306,6 +327,20 @@ def _largest_motion(before: NDArray[np.float64], after: NDArray[np.float64]) -> 
     return translation, float(np.degrees(np.max(np.arccos(cos))))
 
 
+def _motion(
+    objective: JointObjective,
+    before: tuple[NDArray[np.float64], NDArray[np.float64]],
+    after: tuple[NDArray[np.float64], NDArray[np.float64]],
+) -> tuple[float, float]:
+    """The largest motion (m, deg) from `before` to `after` (stops, LiDARs) of the poses
+    convergence is judged on (`OptimisationConfig.converge_on`)."""
+    moved = _largest_motion(before[1], after[1])
+    if objective.config.converge_on == "all_poses" or objective.layout.n_lidars == 1:
+        stop_motion = _largest_motion(before[0], after[0])
+        moved = (max(stop_motion[0], moved[0]), max(stop_motion[1], moved[1]))
+    return moved
+
+
 def lm_step(
     objective: JointObjective,
     pairs: Pairs,
@@ -332,10 +367,7 @@ def lm_step(
         step = np.asarray(-np.linalg.solve(A, b), dtype=np.float64)
         trial_stops, trial_lidars = apply_step(step, layout, stops, lidars)
         if cost(objective, pairs, trial_stops, trial_lidars, scale) <= before:
-            moved = _largest_motion(lidars, trial_lidars)
-            if objective.config.converge_on == "all_poses" or layout.n_lidars == 1:
-                stop_motion = _largest_motion(stops, trial_stops)
-                moved = (max(stop_motion[0], moved[0]), max(stop_motion[1], moved[1]))
+            moved = _motion(objective, (stops, lidars), (trial_stops, trial_lidars))
             return trial_stops, trial_lidars, moved, max(damping / 3.0, 1e-9)
         damping = max(damping * 4.0, 1e-6)
     return stops, lidars, None, damping

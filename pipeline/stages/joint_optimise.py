@@ -92,6 +92,8 @@ def run(state: CalibrationState, config: PipelineConfig, listeners: Listeners) -
         residual=config.optimisation.residual,
         residual_rms_m=result.residual_rms_m,
     )
+    if config.optimisation.acceleration != "none":
+        details["accelerated_steps"] = result.accelerated_steps
     new_state = dataclasses.replace(
         state,
         optimised=result,

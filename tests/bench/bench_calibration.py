@@ -164,6 +164,7 @@ CONFIG_METHODS = (
     "surface_sensitivity",
     "without_model_sensitivity",
     "floor_points",
+    "anderson",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -222,6 +223,8 @@ def method_config(method: str) -> PipelineConfig:
             translation_tolerance_m=1e-5,
             rotation_tolerance_deg=1e-4,
         )
+    elif method == "anderson":
+        data["optimisation"]["acceleration"] = "anderson"
     elif method == "pair_weights":
         data["optimisation"]["pair_weights"] = "lidar_pairs"
     elif method == "stop_prior":

@@ -179,3 +179,21 @@ def test_evaluating_a_solution_where_it_ended_gives_its_own_terms() -> None:
     moved = evaluated(_lengthened(inputs.objects, 1, 0.005))
     assert moved.kernel_scale_m == result.kernel_scale_m
     assert np.linalg.norm(moved.gradient - result.gradient) > 0.0
+
+
+def test_anderson_acceleration_ends_where_the_plain_iteration_does() -> None:
+    # On the box problem the plain iteration converges in a few dozen steps; extrapolating from
+    # its last steps must not take it anywhere else (each extrapolation is kept only where it
+    # lowers the cost), and every step it kept is counted.
+    _, truth = box_problem()
+    inputs = stage_inputs()
+    T_true = true_T_ref_lidar(truth, tuple(lidar.frame for lidar in inputs.prepared.lidars))
+    plain = _optimise(inputs)
+    accelerated = _optimise(inputs, config=OptimisationConfig(acceleration="anderson"))
+    assert accelerated.converged
+    assert plain.accelerated_steps == 0
+    assert 0 < accelerated.accelerated_steps < accelerated.iterations
+    apart = pose_difference(plain.T_ref_lidar[1], accelerated.T_ref_lidar[1])
+    assert apart[0] < 1e-3 and apart[1] < 0.01
+    translation, rotation = pose_difference(T_true[1], accelerated.T_ref_lidar[1])
+    assert translation < 0.01 and rotation < 0.1
