@@ -127,9 +127,14 @@ class DenoiseConfig(BaseModel):
         default_factory=dict,
         description="per LiDAR frame, where its model's optical axis differs from optical_axis",
     )
+    filtered_patterns: tuple[ScanPattern, ...] = Field(
+        default=(ScanPattern.NON_REPETITIVE,),
+        description="the scan patterns whose clouds the pipeline filters (`repetitive` added: "
+        "spinning LiDARs too, opt-in; see `pipeline.stages.denoise_stage.stage_1_filters`)",
+    )
     scan_patterns: dict[str, ScanPattern] = Field(
         default_factory=dict,
-        description="the pipeline filters only non-repetitive LiDARs' clouds; this maps a LiDAR "
+        description="the pipeline filters the clouds of `filtered_patterns`; this maps a LiDAR "
         "frame to its scan pattern where the recording says otherwise (a spinning LiDAR whose "
         "driver publishes no ring field: repetitive)",
     )

@@ -25,7 +25,8 @@ from pipeline.transforms import Points
 
 
 def stage_1_filters(lidar: LidarInfo, config: DenoiseConfig) -> bool:
-    """Whether stage 1 filters this LiDAR's clouds: when enabled, for non-repetitive scans only.
+    """Whether stage 1 filters this LiDAR's clouds: when enabled, for the scan patterns
+    `config.filtered_patterns` names, by default non-repetitive scans only.
 
     The filter takes a point that is sparse for its place in the scan, on a sheet along its beam,
     for a mixed return (METHOD.md: a filter for non-repetitive scans). A spinning LiDAR re-fires
@@ -39,7 +40,7 @@ def stage_1_filters(lidar: LidarInfo, config: DenoiseConfig) -> bool:
     0.09 mm on average (the benchmark quoted at `PipelineConfig.denoise`).
     `config.scan_patterns` overrides the recording's pattern."""
     pattern = config.scan_patterns.get(lidar.frame, lidar.scan_pattern)
-    return config.enabled and pattern is ScanPattern.NON_REPETITIVE
+    return config.enabled and pattern in config.filtered_patterns
 
 
 def denoise_above_floor(

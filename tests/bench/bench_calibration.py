@@ -165,6 +165,7 @@ CONFIG_METHODS = (
     "without_model_sensitivity",
     "floor_points",
     "anderson",
+    "stage1_spinning",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -225,6 +226,8 @@ def method_config(method: str) -> PipelineConfig:
         )
     elif method == "anderson":
         data["optimisation"]["acceleration"] = "anderson"
+    elif method == "stage1_spinning":
+        data["denoise"]["filtered_patterns"] = ["non_repetitive", "repetitive"]
     elif method == "pair_weights":
         data["optimisation"]["pair_weights"] = "lidar_pairs"
     elif method == "stop_prior":

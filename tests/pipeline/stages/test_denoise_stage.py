@@ -77,6 +77,20 @@ def test_stage_1_leaves_repetitive_scans_alone() -> None:
     assert stage_1(problem, off).message == "disabled"
 
 
+def test_stage_1_filters_spinning_lidars_when_the_config_names_their_pattern() -> None:
+    problem = spinning(box_problem()[0], "lidar_rear")
+    config = PipelineConfig.model_validate(
+        {"denoise": {"filtered_patterns": ["non_repetitive", "repetitive"]}}
+    )
+    prepared = prepare(problem, config)
+    assert prepared.filtered_frames == ("lidar_front", "lidar_rear")
+    assert prepared.kept is not None and any(keep is not None for keep in prepared.kept[1])
+    only_spinning = PipelineConfig.model_validate(
+        {"denoise": {"filtered_patterns": ["repetitive"]}}
+    )
+    assert prepare(problem, only_spinning).filtered_frames == ("lidar_rear",)
+
+
 def test_stage_1_names_the_lidars_it_left_alone() -> None:
     outcome = stage_1(spinning(box_problem()[0]), PipelineConfig())
     assert outcome.message == "lidar_front, lidar_rear not filtered (repetitive scans)"
