@@ -66,17 +66,6 @@ class StopDetectionConfig(BaseModel):
         gt=0,
         description="a longer gap in the trajectory ends a stop: nothing is known there",
     )
-    max_drift_m: float | None = Field(
-        default=None,
-        gt=0,
-        description="with max_drift_deg: each stop is narrowed to where the base stayed within "
-        "this distance of its pose at the stop's stillest moment (a routine that eases into "
-        "and out of its stops creeps millimetres under the speed thresholds, smearing the "
-        "stop's scans; opt-in, see docs/method.md); None: stops as the speeds find them",
-    )
-    max_drift_deg: float | None = Field(
-        default=None, gt=0, description="... and within this rotation of it (with max_drift_m)"
-    )
 
 
 class ArchiveLimits(BaseModel):

@@ -320,10 +320,7 @@ def _stops(
     stops = detect_stops(motion.trajectory, min_dwell_s=min_dwell_s, **settings)
     if stops:
         return stops
-    runs = still_runs(
-        motion.trajectory,
-        **{k: v for k, v in settings.items() if k not in ("max_drift_m", "max_drift_deg")},
-    )
+    runs = still_runs(motion.trajectory, **settings)
     longest = float(runs.durations_s.max()) if len(runs.durations_s) else 0.0
     raise NoStopsError(
         f"{opened.path}: no stops found in the trajectory ({motion.trajectory.source}, "

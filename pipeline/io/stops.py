@@ -155,52 +155,6 @@ def lasts_at_least(
     return kept
 
 
-def settled(
-    trajectory: Trajectory,
-    runs: StillRuns,
-    *,
-    speed_window_s: float,
-    max_drift_m: float,
-    max_drift_deg: float,
-) -> StillRuns:
-    """`runs` narrowed to where the base stayed within `max_drift_m` and `max_drift_deg` of its
-    pose at the run's stillest sample (the middle of those with the least windowed speed).
-
-    The speed thresholds take a base that still creeps for a still one: where a routine eases
-    into and out of its stops (a minimum-jerk ramp), the base spends a few tenths of a second
-    under 2 cm/s and moves millimetres there, and a stop's scans would be smeared by that much.
-    What matters to the clouds is how far the base moved, not how fast: each narrowed run keeps
-    the samples around its stillest one that stay within the drift of it (`first` and `last`
-    then bound that narrowed run, `start` and `end` equal them)."""
-    stamps = trajectory.stamps_ns
-    linear, angular = speeds(trajectory, speed_window_s)
-    rotations = trajectory.rotations
-    first, last = [], []
-    for lo, hi in zip(runs.start, runs.end, strict=True):
-        core = np.arange(lo, hi + 1)
-        # Speed in tolerances per second: how soon the base would leave them.
-        least = linear[core] / max_drift_m + angular[core] / max_drift_deg
-        calm = core[least == least.min()]
-        centre = int(calm[len(calm) // 2])
-        moved = np.linalg.norm(
-            trajectory.translations[core] - trajectory.translations[centre], axis=1
-        )
-        turned = np.degrees((rotations[core].inv() * rotations[centre]).magnitude())
-        away = np.flatnonzero((moved > max_drift_m) | (turned > max_drift_deg)) + lo
-        before, after = away[away < centre], away[away > centre]
-        first.append(int(before.max()) + 1 if len(before) else int(lo))
-        last.append(int(after.min()) - 1 if len(after) else int(hi))
-    narrowed_first = np.asarray(first, dtype=np.intp)
-    narrowed_last = np.asarray(last, dtype=np.intp)
-    return StillRuns(
-        narrowed_first,
-        narrowed_last,
-        narrowed_first,
-        narrowed_last,
-        stamps[narrowed_last] - stamps[narrowed_first],
-    )
-
-
 def detect_stops(
     trajectory: Trajectory,
     *,
@@ -209,12 +163,9 @@ def detect_stops(
     min_dwell_s: float,
     speed_window_s: float,
     max_sample_gap_s: float,
-    max_drift_m: float | None = None,
-    max_drift_deg: float | None = None,
 ) -> tuple[StopSpan, ...]:
     """The still spans lasting at least `min_dwell_s`, in time order, with the mean pose of
-    their still samples; narrowed to where the base stayed within `max_drift_m` and
-    `max_drift_deg` of its stillest pose when both are given (`settled`)."""
+    their still samples."""
     runs = still_runs(
         trajectory,
         max_linear_speed=max_linear_speed,
@@ -222,14 +173,6 @@ def detect_stops(
         speed_window_s=speed_window_s,
         max_sample_gap_s=max_sample_gap_s,
     )
-    if max_drift_m is not None and max_drift_deg is not None and len(runs.first):
-        runs = settled(
-            trajectory,
-            runs,
-            speed_window_s=speed_window_s,
-            max_drift_m=max_drift_m,
-            max_drift_deg=max_drift_deg,
-        )
     stamps = trajectory.stamps_ns
     period_ns = int(np.median(np.diff(stamps))) if len(stamps) > 1 else 0
     keep = lasts_at_least(runs.durations_ns, min_dwell_s, period_ns)

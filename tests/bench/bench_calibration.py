@@ -166,7 +166,6 @@ CONFIG_METHODS = (
     "floor_points",
     "anderson",
     "stage1_spinning",
-    "settled_stops",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -227,9 +226,6 @@ def method_config(method: str) -> PipelineConfig:
         )
     elif method == "anderson":
         data["optimisation"]["acceleration"] = "anderson"
-    elif method == "settled_stops":
-        data["reader"]["stops"]["max_drift_m"] = 0.001
-        data["reader"]["stops"]["max_drift_deg"] = 0.02
     elif method == "stage1_spinning":
         data["denoise"]["filtered_patterns"] = ["non_repetitive", "repetitive"]
     elif method == "pair_weights":
