@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from pipeline.denoise.centre import fit_floor_plane, observation_centre
 from pipeline.denoise.filters import (
@@ -138,6 +138,16 @@ class DenoiseConfig(BaseModel):
         "frame to its scan pattern where the recording says otherwise (a spinning LiDAR whose "
         "driver publishes no ring field: repetitive)",
     )
+
+    @field_validator("filtered_patterns")
+    @classmethod
+    def _known_patterns_only(cls, patterns: tuple[ScanPattern, ...]) -> tuple[ScanPattern, ...]:
+        if ScanPattern.UNKNOWN in patterns:
+            raise ValueError(
+                "stage 1 never filters a LiDAR whose scan pattern is unknown (the filter would "
+                "be a guess); name that LiDAR's pattern in denoise.scan_patterns instead"
+            )
+        return patterns
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,8 @@
 import dataclasses
 
 import numpy as np
+import pytest
+from pydantic import ValidationError
 
 from pipeline.calibrate import prepare
 from pipeline.config import PipelineConfig
@@ -89,6 +91,8 @@ def test_stage_1_filters_spinning_lidars_when_the_config_names_their_pattern() -
         {"denoise": {"filtered_patterns": ["repetitive"]}}
     )
     assert prepare(problem, only_spinning).filtered_frames == ("lidar_rear",)
+    with pytest.raises(ValidationError, match="name that LiDAR's pattern"):
+        PipelineConfig.model_validate({"denoise": {"filtered_patterns": ["unknown"]}})
 
 
 def test_stage_1_names_the_lidars_it_left_alone() -> None:
