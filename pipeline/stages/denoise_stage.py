@@ -145,11 +145,15 @@ def _message(state: CalibrationState, filtered: _Filtered, config: DenoiseConfig
     if not config.enabled:
         return "disabled"
     unfiltered = [f for f in state.lidars if f.frame not in state.filtered_frames]
-    reasons = {ScanPattern.UNKNOWN: "scan pattern unknown"}
+    reasons = {
+        ScanPattern.UNKNOWN: "scan pattern unknown",
+        ScanPattern.REPETITIVE: "repetitive scans",
+        ScanPattern.NON_REPETITIVE: "non-repetitive scans, not in denoise.filtered_patterns",
+    }
     by_reason: dict[str, list[str]] = {}
     for lidar in unfiltered:
         pattern = config.scan_patterns.get(lidar.frame, lidar.scan_pattern)
-        by_reason.setdefault(reasons.get(pattern, "repetitive scans"), []).append(lidar.frame)
+        by_reason.setdefault(reasons[pattern], []).append(lidar.frame)
     left_alone = "; ".join(
         f"{', '.join(frames)} not filtered ({reason})" for reason, frames in by_reason.items()
     )

@@ -91,6 +91,9 @@ def test_stage_1_filters_spinning_lidars_when_the_config_names_their_pattern() -
         {"denoise": {"filtered_patterns": ["repetitive"]}}
     )
     assert prepare(problem, only_spinning).filtered_frames == ("lidar_rear",)
+    assert stage_1(problem, only_spinning).message.endswith(
+        "lidar_front not filtered (non-repetitive scans, not in denoise.filtered_patterns)"
+    )
     with pytest.raises(ValidationError, match="name that LiDAR's pattern"):
         PipelineConfig.model_validate({"denoise": {"filtered_patterns": ["unknown"]}})
 
