@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.geometry import exp_se3, log_se3
-from pipeline.optimisation.layout import ParameterLayout
+from pipeline.geometry import log_se3
+from pipeline.optimisation.layout import ParameterLayout, apply_step
 
 Poses = tuple[NDArray[np.float64], NDArray[np.float64]]
 """`T_G_ref` (J, 4, 4) of the stops and `T_ref_lidar` (L, 4, 4) of the LiDARs."""
@@ -59,10 +59,7 @@ class AndersonAcceleration:
 
     def poses(self, x: NDArray[np.float64]) -> Poses:
         """The poses at the twists `x` (P,): the inverse of `twists`."""
-        stops, lidars = self.start_stops.copy(), self.start_lidars.copy()
-        for column, pose, start in self._free(stops, lidars):
-            pose[:] = exp_se3(x[column : column + 6]) @ start
-        return stops, lidars
+        return apply_step(x, self.layout, self.start_stops, self.start_lidars)
 
     def _free(
         self, stops: NDArray[np.float64], lidars: NDArray[np.float64]

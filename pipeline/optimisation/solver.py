@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.geometry import Plane, exp_se3
+from pipeline.geometry import Plane
 from pipeline.optimisation.acceleration import AndersonAcceleration
 from pipeline.optimisation.assembly import (
     block_contributions,
@@ -20,7 +20,7 @@ from pipeline.optimisation.assembly import (
 )
 from pipeline.optimisation.association import Pairs, associate
 from pipeline.optimisation.config import OptimisationConfig
-from pipeline.optimisation.layout import ParameterLayout
+from pipeline.optimisation.layout import apply_step
 from pipeline.optimisation.objective import JointObjective, PlacedClouds
 from pipeline.optimisation.pair_noise import with_lidar_pair_sigmas
 from pipeline.optimisation.residuals import (
@@ -300,23 +300,6 @@ def _result(
         kernel_scale_m=run.scale,
         accelerated_steps=run.accelerated,
     )
-
-
-def apply_step(
-    step: NDArray[np.float64],
-    layout: ParameterLayout,
-    T_G_ref: NDArray[np.float64],
-    T_ref_lidar: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The poses moved by the state-vector `step` (P,): each pose's twist on its left."""
-    new_stops, new_lidars = T_G_ref.copy(), T_ref_lidar.copy()
-    for j in range(1, layout.n_stops):
-        c = layout.stop(j)
-        new_stops[j] = exp_se3(step[c : c + 6]) @ T_G_ref[j]
-    for i in range(1, layout.n_lidars):
-        c = layout.lidar(i)
-        new_lidars[i] = exp_se3(step[c : c + 6]) @ T_ref_lidar[i]
-    return new_stops, new_lidars
 
 
 def _largest_motion(before: NDArray[np.float64], after: NDArray[np.float64]) -> tuple[float, float]:

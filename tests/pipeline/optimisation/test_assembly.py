@@ -4,10 +4,9 @@ import pytest
 from pipeline.optimisation import OptimisationConfig, ResidualKind
 from pipeline.optimisation.assembly import block_contributions, normal_equations
 from pipeline.optimisation.association import associate
-from pipeline.optimisation.layout import ParameterLayout
+from pipeline.optimisation.layout import ParameterLayout, apply_step
 from pipeline.optimisation.objective import JointObjective
 from pipeline.optimisation.residuals import cost
-from pipeline.optimisation.solver import apply_step
 from tests.pipeline.optimisation.inputs import stage_inputs
 
 

@@ -2,8 +2,7 @@ import numpy as np
 import pytest
 
 from pipeline.optimisation import OptimisationConfig, OptimisationResult, optimise
-from pipeline.optimisation.layout import ParameterLayout
-from pipeline.optimisation.solver import apply_step
+from pipeline.optimisation.layout import ParameterLayout, apply_step
 from pipeline.optimisation.stop_prior import stop_prior_terms
 from pipeline.transforms import Points, pose_difference
 from tests.pipeline.optimisation.inputs import StageInputs, stage_inputs
