@@ -165,6 +165,7 @@ CONFIG_METHODS = (
     "without_model_sensitivity",
     "floor_points",
     "anderson",
+    "plain_iteration",
     "stage1_spinning",
 )
 """Methods that are the pipeline with another configuration."""
@@ -226,6 +227,8 @@ def method_config(method: str) -> PipelineConfig:
         )
     elif method == "anderson":
         data["optimisation"]["acceleration"] = "anderson"
+    elif method == "plain_iteration":
+        data["optimisation"]["acceleration"] = "none"
     elif method == "stage1_spinning":
         data["denoise"]["filtered_patterns"] = ["non_repetitive", "repetitive"]
     elif method == "pair_weights":

@@ -60,10 +60,16 @@ def test_a_range_bias_moves_the_solution_as_its_gradient_predicts() -> None:
     # Each LiDAR's surfaces set 2 mm further along its rays: the solution moves by about
     # -(H + prior)^-1 db/dbeta x 2 mm, the shift the observability stage charges to a bias.
     # (A linearisation: at 5 mm the beam quadric's surfaces move it 26-66 % off the prediction.)
+    # The plain iteration, which ends within 0.1-0.3 mm of where it would after 400 steps: on
+    # this sparse fixture the final kernel's pairs leave poses about a millimetre apart all
+    # nearly fixed points, and Anderson's extrapolations (the default) land on one or another
+    # (0.7 mm from the plain iteration's after 400 steps each), which is not the shift measured.
     inputs = stage_inputs()
 
     def solve(objects: list[list[Points]]) -> OptimisationResult:
-        return _optimise(inputs, objects, range_bias=True)
+        return _optimise(
+            inputs, objects, config=OptimisationConfig(acceleration="none"), range_bias=True
+        )
 
     base = solve(inputs.objects)
     assert base.range_bias_cross.shape == (base.layout.n_lidars, base.layout.size)
@@ -188,8 +194,9 @@ def test_anderson_acceleration_ends_where_the_plain_iteration_does() -> None:
     _, truth = box_problem()
     inputs = stage_inputs()
     T_true = true_T_ref_lidar(truth, tuple(lidar.frame for lidar in inputs.prepared.lidars))
-    plain = _optimise(inputs)
-    accelerated = _optimise(inputs, config=OptimisationConfig(acceleration="anderson"))
+    plain = _optimise(inputs, config=OptimisationConfig(acceleration="none"))
+    accelerated = _optimise(inputs)
+    assert OptimisationConfig().acceleration == "anderson"
     assert accelerated.converged
     assert plain.accelerated_steps == 0
     assert 0 < accelerated.accelerated_steps < accelerated.iterations

@@ -98,11 +98,14 @@ def test_a_stop_without_object_points_stays_near_where_it_started(stop: int) -> 
 
 def test_the_extrinsics_converge_whatever_a_stop_nothing_holds_does() -> None:
     # Without the prior the empty stop moves as rounding noise takes it; the extrinsics settle
-    # all the same, and convergence is judged on them (`converge_on`).
+    # all the same, and convergence is judged on them (`converge_on`). The plain iteration: on
+    # this sparse fixture (5 % of the point rate) the final kernel's pairs leave poses about a
+    # millimetre apart all nearly fixed points, and Anderson's extrapolations (the default) land
+    # on one or another of them, 0.9 mm apart here, whatever the prior.
     inputs = stage_inputs()
     objects = _without_stop(inputs, 5)
-    result = _solve(inputs, objects, stop_prior_sigma_m=None)
-    reference = _solve(inputs, objects)
+    result = _solve(inputs, objects, stop_prior_sigma_m=None, acceleration="none")
+    reference = _solve(inputs, objects, acceleration="none")
     moved_m, turned_deg = pose_difference(reference.T_ref_lidar[1], result.T_ref_lidar[1])
     assert result.converged and result.iterations < 100
     assert moved_m < 5e-4 and turned_deg < 0.01
