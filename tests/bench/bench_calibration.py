@@ -167,6 +167,7 @@ CONFIG_METHODS = (
     "anderson",
     "plain_iteration",
     "stage1_spinning",
+    "blocks_2m",
 )
 """Methods that are the pipeline with another configuration."""
 
@@ -229,6 +230,8 @@ def method_config(method: str) -> PipelineConfig:
         data["optimisation"]["acceleration"] = "anderson"
     elif method == "plain_iteration":
         data["optimisation"]["acceleration"] = "none"
+    elif method == "blocks_2m":
+        data["optimisation"]["uncertainty_block_m"] = 2.0
     elif method == "stage1_spinning":
         data["denoise"]["filtered_patterns"] = ["non_repetitive", "repetitive"]
     elif method == "pair_weights":
